@@ -1,0 +1,19 @@
+"""Typed errors raised by the generator for bad input."""
+
+from __future__ import annotations
+
+
+class ConfigError(ValueError):
+    """An invalid configuration value; ``field`` names the offending field."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+
+
+class MeshError(ValueError):
+    """A mushroom mesh that cannot be used (not watertight, no cap, unreadable)."""
+
+
+class SceneFormatError(ValueError):
+    """A scene file that cannot be read back (corrupt JSON, wrong schema version)."""
