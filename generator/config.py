@@ -41,9 +41,9 @@ def _require_range(name: str, lo: float, hi: float, *, positive: bool = True) ->
 class TerrainConfig:
     """Perlin fBm soil: ``z(x, y) = A * sum_o p**o * n(L**o * s * x, L**o * s * y) + z0``."""
 
-    size_x: float = 0.5  # m, patch extent along x
-    size_y: float = 0.5  # m
-    resolution: int = 128  # grid points along each axis (the paper's R_I = R_J)
+    size_x: float = 0.7  # m, patch extent along x (wider than the placement range so the camera sees soil)
+    size_y: float = 0.7  # m
+    resolution: int = 160  # grid points along each axis (the paper's R_I = R_J), ~4.4 mm spacing
     amplitude: float = 0.008  # m, the paper's A
     scale: float = 8.0  # 1/m, the paper's s (features of ~1/s = 12 cm)
     octaves: int = 6  # O
@@ -121,7 +121,7 @@ class CameraConfig:
     preset: Literal["d405", "d435"] = "d405"
     width: int = 640
     height: int = 480
-    height_above_soil: float = 0.42  # m, inside a D405's best range
+    height_above_soil: float = 0.40  # m, inside a D405's best range (7-50 cm)
     tilt_deg: float = 0.0  # rotation about the camera's x axis away from straight down
     znear: float = 0.05
     zfar: float = 2.0

@@ -18,7 +18,7 @@ import trimesh
 from generator.config import Species
 
 MODELS_PER_SPECIES = 7
-_SEGMENTS = 48
+_SEGMENTS = 32
 
 # Mass from cap diameter D in mm, m = a * D**b grams (log-log fits of measured mushrooms).
 MASS_FIT = {"white": (1.464e-3, 2.500), "brown": (1.681e-3, 2.508)}
