@@ -32,8 +32,10 @@ def find_cap_bottom(mesh: trimesh.Trimesh, widening: float = 1.6) -> float:
 
     Raises ``MeshError`` when no such height exists (a shape without a clear cap).
     """
-    z = mesh.vertices[:, 2]
-    r = np.linalg.norm(mesh.vertices[:, :2], axis=1)
+    # Surface samples, not vertices: long flat-sided parts have vertices only at their ends.
+    points, _ = trimesh.sample.sample_surface(mesh, 20_000, seed=0)
+    z = points[:, 2]
+    r = np.linalg.norm(points[:, :2], axis=1)
     edges = np.linspace(z.min(), z.max(), 41)
     widths = np.array([r[(z >= a) & (z < b)].max(initial=0.0) for a, b in zip(edges[:-1], edges[1:])])
     stem_width = np.median(widths[1:8][widths[1:8] > 0]) if np.any(widths[1:8] > 0) else 0.0

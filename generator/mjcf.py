@@ -20,6 +20,8 @@ from generator.scene import Scene
 
 SOIL_TEXTURE = "soil.png"
 TERRAIN_THICKNESS = 0.05  # m of heightfield below its lowest point
+ROOT_SOLREF = [0.004, 1.0]  # 2 x the timestep
+ROOT_SOLIMP = [0.99, 0.999, 0.001, 0.5, 2.0]
 
 
 def soil_texture(seed: int, size: int = 256) -> np.ndarray:
@@ -101,8 +103,15 @@ def scene_to_spec(scene: Scene, *, mushroom_collisions: bool = False, shadows: b
                           material=f"{inst.species}_{part}", mass=inst.mass * part_volumes[part] / total,
                           contype=contype, conaffinity=contype, condim=4, friction=[0.8, 0.01, 0.001])
         body.add_site(name=f"{name}_cap_top", pos=[0, 0, model.cap_top_z * scale[2]], size=[0.002, 0, 0], group=4)
-        spec.add_equality(name=f"{name}_root", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
-                          name1=name, name2="world", active=True)
+        root = spec.add_equality(name=f"{name}_root", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                                 name1=name, name2="world", active=True)
+        # Anchor at the stem base; a zero relative pose means "as placed" (MjSpec's default
+        # anchor is (0, 1, 0), which would hold the mushroom a metre away from its stem).
+        root.data[:10] = 0.0
+        # Stiff and hard: with MuJoCo's default soft weld a light, top-heavy mushroom sags and
+        # tips over within a second; this holds it within a millimetre.
+        root.solref = ROOT_SOLREF
+        root.solimp = ROOT_SOLIMP
     return spec
 
 

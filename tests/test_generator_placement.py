@@ -1,0 +1,97 @@
+import numpy as np
+import pytest
+import trimesh
+from scipy import stats
+
+from generator import SceneConfig, generate_scene, model_library
+from generator.config import PlacementConfig
+from generator.placement import sample_tilt
+
+
+def test_roll_pitch_std_and_yaw_uniform():
+    config = PlacementConfig()
+    rng = np.random.default_rng(123)
+    tilts = np.rad2deg(sample_tilt(config, rng, size=10_000)).reshape(-1, 2)
+    assert abs(tilts[:, 0].std() - 20.0) < 1.0
+    assert abs(tilts[:, 1].std() - 20.0) < 1.0
+    assert abs(tilts.mean()) < 1.0  # signed, as the paper says
+    half = np.rad2deg(sample_tilt(PlacementConfig(tilt_distribution="half_normal"), rng, size=5000))
+    assert half.min() >= 0
+
+
+@pytest.fixture(scope="module")
+def dense_scene():
+    return generate_scene(SceneConfig().replace(placement__num_mushrooms=60), seed=5)
+
+
+def test_yaw_of_placed_mushrooms_is_uniform(dense_scene):
+    scenes = [dense_scene] + [generate_scene(SceneConfig().replace(placement__num_mushrooms=60), seed=s) for s in (6, 7)]
+    yaw = []
+    for scene in scenes:
+        for m in scene.instances:
+            # yaw of R = Rz Ry Rx is atan2(R[1,0], R[0,0])
+            yaw.append(np.arctan2(m.rotation[1, 0], m.rotation[0, 0]) % (2 * np.pi))
+    assert stats.kstest(np.asarray(yaw), "uniform", args=(0, 2 * np.pi)).pvalue > 0.01
+
+
+def test_every_pair_overlaps_at_most_tau(dense_scene):
+    tau = dense_scene.config.placement.overlap_iou
+    meshes = []
+    for m in dense_scene.instances:
+        mesh = m.model.mesh.copy()
+        mesh.apply_transform(m.transform)
+        meshes.append(mesh)
+    worst = 0.0
+    for i in range(len(meshes)):
+        for j in range(i):
+            if np.linalg.norm(meshes[i].bounding_sphere.center - meshes[j].bounding_sphere.center) > (
+                meshes[i].bounding_sphere.primitive.radius + meshes[j].bounding_sphere.primitive.radius):
+                continue
+            inter = trimesh.boolean.intersection([meshes[i], meshes[j]], engine="manifold")
+            v = inter.volume if len(inter.faces) else 0.0
+            iou = v / (meshes[i].volume + meshes[j].volume - v)
+            worst = max(worst, iou)
+    assert worst <= tau + 1e-6
+    assert len(dense_scene.instances) == 60
+
+
+def test_stem_bases_on_terrain(dense_scene):
+    for m in dense_scene.instances:
+        ground = dense_scene.terrain.height_at(m.stem_base[0], m.stem_base[1])
+        assert abs(m.stem_base[2] - ground) < 1e-3
+        # the mesh's lowest point is sunk no deeper than the insertion depth plus the stem's
+        # tilted footprint; it never floats above the soil
+        mesh = m.model.mesh.copy()
+        mesh.apply_transform(m.transform)
+        low = mesh.vertices[np.argmin(mesh.vertices[:, 2])]
+        assert low[2] <= dense_scene.terrain.height_at(low[0], low[1]) + 1e-3
+
+
+def test_annotations_consistent_with_mesh(dense_scene):
+    for m in dense_scene.instances:
+        assert np.allclose(m.rotation.T @ m.rotation, np.eye(3), atol=1e-9)
+        assert np.isclose(np.linalg.det(m.rotation), 1.0)
+        assert np.isclose(np.linalg.norm(m.stem_axis), 1.0)
+        cap = m.model.cap_mesh.copy()
+        cap.apply_transform(m.transform)
+        # every cap vertex lies inside its oriented box
+        local = (cap.vertices - m.cap_obb.center) @ m.cap_obb.rotation
+        assert np.all(np.abs(local) <= m.cap_obb.size / 2 + 1e-9)
+        assert np.allclose(m.cap_obb.corners.mean(axis=0), m.cap_obb.center)
+        # the cap top is the cap's highest point along the stem axis
+        assert np.isclose((cap.vertices @ m.stem_axis).max(), m.cap_top @ m.stem_axis, atol=1e-9)
+        assert 0.015 < m.cap_diameter < 0.09
+
+
+def test_models_are_watertight_and_shaped():
+    for species in ("white", "brown"):
+        models = model_library(species)
+        assert len(models) >= 7
+        assert len({round(m.cap_diameter, 6) for m in models}) == len(models)
+        for model in models:
+            for mesh in (model.mesh, model.cap_mesh, model.stem_mesh):
+                assert mesh.is_watertight and mesh.volume > 0
+            assert np.allclose(model.mesh.bounds[0][2], 0.0, atol=1e-9)  # stem base at z = 0
+            assert model.cap_bottom_z < model.cap_top_z
+            stem_r = np.linalg.norm(model.stem_mesh.vertices[:, :2], axis=1).max()
+            assert 0.25 < 2 * stem_r / model.cap_diameter < 0.5  # stem a third of the cap across
