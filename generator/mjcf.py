@@ -59,6 +59,8 @@ def scene_to_spec(scene: Scene, *, mushroom_collisions: bool = False, shadows: b
 
     png = cv2.imencode(".png", cv2.cvtColor(soil_texture(scene.seed), cv2.COLOR_RGB2BGR))[1].tobytes()
     spec.assets = {SOIL_TEXTURE: png}
+    spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+                     rgb1=[0.55, 0.55, 0.5], rgb2=[0.15, 0.15, 0.15], width=64, height=64)
     spec.add_texture(name="soil", type=mujoco.mjtTexture.mjTEXTURE_2D, file=SOIL_TEXTURE)
     soil = spec.add_material(name="soil", rgba=[1, 1, 1, 1], texrepeat=[1, 1], specular=0.05, shininess=0.05)
     soil.textures[int(mujoco.mjtTextureRole.mjTEXROLE_RGB)] = "soil"

@@ -1,0 +1,41 @@
+"""Pictures of a scene for people: the overhead camera's view and an oblique view."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402
+
+from generator.mjcf import scene_to_model  # noqa: E402
+from generator.scene import Scene  # noqa: E402
+
+
+def render_views(scene: Scene, width: int = 640, height: int = 480) -> np.ndarray:
+    """The overhead camera's RGB image beside an oblique view, as one (H, 2W, 3) uint8 image."""
+    model = scene_to_model(scene, shadows=True)
+    model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
+    model.vis.global_.offheight = max(model.vis.global_.offheight, height)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    oblique = mujoco.MjvCamera()
+    oblique.lookat[:] = [0.0, 0.0, float(np.median(scene.terrain.heights))]
+    oblique.distance, oblique.azimuth, oblique.elevation = 0.55, 60.0, -35.0
+    with mujoco.Renderer(model, height, width) as renderer:
+        renderer.update_scene(data, camera="overhead")
+        top = renderer.render()
+        renderer.update_scene(data, camera=oblique)
+        side = renderer.render()
+    return np.concatenate([top, side], axis=1)
+
+
+def save_preview(scene: Scene, path: str, width: int = 640, height: int = 480) -> None:
+    """Write ``render_views`` as a PNG."""
+    import cv2
+
+    image = render_views(scene, width, height)
+    if not cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
+        raise OSError(f"cannot write {path}")
