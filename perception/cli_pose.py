@@ -1,0 +1,139 @@
+"""``sms3d train-pose`` / ``sms3d eval-pose``: argparse subcommands for the pose network.
+
+``register(subparsers)`` adds both to an existing ``argparse`` sub-parser group; each sets
+``func`` to a callable taking the parsed args and returning an exit code. Runnable standalone as
+``python -m perception.cli_pose {train-pose,eval-pose} ...``.
+
+Data: ``--data`` reads per-instance samples from a ``.npz`` in the :mod:`perception.data`
+format (``--val-data`` likewise); without it, single-mushroom views are rendered on the fly by
+:mod:`perception.synthetic_views` from the generator's model library with the given seeds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import torch
+
+from perception.data import PointCloudPoseDataset, load_samples, save_samples
+from perception.errors import PerceptionConfigError
+from perception.pose_net import PoseNetConfig, load_checkpoint
+from perception.synthetic_views import default_models, generate_samples
+from perception.train import TrainConfig, evaluate, train
+
+DEFAULT_TRAIN_MODEL_IDS = (0, 1, 2, 3, 4, 5)  # model 6 of each species is held out
+
+
+def _ids(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected comma-separated ints, got {text!r}") from exc
+
+
+def _samples(data: str | None, n: int, seed: int, model_ids: Sequence[int] | None, cache: Path | None, label: str):
+    if data:
+        return load_samples(data)
+    if cache is not None:
+        path = cache / f"{label}_n{n}_seed{seed}_models{'-'.join(map(str, model_ids or []))}.npz"
+        if path.exists():
+            return load_samples(path)
+    t = time.perf_counter()
+    samples = generate_samples(n, seed, default_models(model_ids=model_ids))
+    print(f"rendered {n} {label} views (seed {seed}) in {time.perf_counter() - t:.1f} s", file=sys.stderr)
+    if cache is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+        save_samples(path, samples)
+    return samples
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    torch.set_num_threads(args.threads)
+    try:
+        net = PoseNetConfig(backbone=args.backbone, head=args.head, use_rgb=args.rgb, num_points=args.num_points)
+        cfg = TrainConfig(
+            epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, loss=args.loss, seed=args.seed,
+            device=args.device, plateau_patience=args.patience, progress=not args.quiet,
+            time_limit_s=None if args.time_limit_min is None else args.time_limit_min * 60.0,
+        )  # fmt: skip
+    except PerceptionConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    cache = Path(args.cache) if args.cache else None
+    train_s = _samples(args.data, args.num_train, args.seed * 1000 + 1, args.model_ids, cache, "train")
+    val_s = _samples(args.val_data, args.num_val, args.seed * 1000 + 2, args.model_ids, cache, "val")
+    tr = PointCloudPoseDataset(train_s, net.num_points, net.use_rgb, cfg.augment, seed=args.seed)
+    va = PointCloudPoseDataset(val_s, net.num_points, net.use_rgb, None, seed=args.seed + 1)
+    t = time.perf_counter()
+    _, rows = train(net, cfg, tr, va, args.out, resume=args.resume)
+    best = min(rows, key=lambda r: r["val_loss"]) if rows else {}
+    print(json.dumps({"train_time_s": time.perf_counter() - t, "epochs": len(rows), "best": best}, indent=2))
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    torch.set_num_threads(args.threads)
+    from perception.estimator import default_weights_path
+
+    path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
+    model, extra = load_checkpoint(path, map_location=args.device)
+    net = model.config
+    samples = _samples(args.data, args.num, args.seed, args.model_ids, None, "test")
+    ds = PointCloudPoseDataset(samples, net.num_points, net.use_rgb, None, seed=args.seed)
+    _, m, *_ = evaluate(model, ds, device=args.device)
+    print(json.dumps({"checkpoint": str(path), "config": net.to_dict(), **m.as_dict()}, indent=2))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``train-pose`` and ``eval-pose`` to ``subparsers``."""
+    p = subparsers.add_parser("train-pose", help="train the pose network on rendered single-mushroom views")
+    p.add_argument("--out", required=True, help="output folder (checkpoints, log.csv)")
+    p.add_argument("--backbone", default="point_transformer", choices=("point_transformer", "pointnet", "pointnet2"))
+    p.add_argument("--head", default="6d", choices=("6d", "9d", "quat", "euler"))
+    p.add_argument("--rgb", action="store_true", help="feed RGB with the points")
+    p.add_argument("--num-points", type=int, default=1024)
+    p.add_argument("--epochs", type=int, default=50)
+    p.add_argument("--batch-size", type=int, default=32)
+    p.add_argument("--lr", type=float, default=1e-4)
+    p.add_argument("--patience", type=int, default=5, help="ReduceLROnPlateau patience (epochs)")
+    p.add_argument("--loss", default="geodesic", choices=("geodesic", "axis", "geodesic+axis"))
+    p.add_argument("--num-train", type=int, default=4000)
+    p.add_argument("--num-val", type=int, default=500)
+    p.add_argument("--model-ids", type=_ids, default=DEFAULT_TRAIN_MODEL_IDS, help="generator model ids to render")
+    p.add_argument("--data", help="training samples .npz (perception.data format) instead of rendering")
+    p.add_argument("--val-data", help="validation samples .npz")
+    p.add_argument("--cache", help="folder to cache rendered views as .npz")
+    p.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this wall time")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_train)
+
+    e = subparsers.add_parser("eval-pose", help="evaluate a pose checkpoint (default: shipped weights)")
+    e.add_argument("--checkpoint", help="checkpoint path (default: perception/weights/posenet_default.pt)")
+    e.add_argument("--data", help="samples .npz; default: render --num views with --seed")
+    e.add_argument("--num", type=int, default=500)
+    e.add_argument("--seed", type=int, default=12345)
+    e.add_argument("--model-ids", type=_ids, default=None, help="generator model ids (default: all)")
+    e.add_argument("--device", default="cpu")
+    e.add_argument("--threads", type=int, default=2)
+    e.set_defaults(func=cmd_eval)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m perception.cli_pose")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

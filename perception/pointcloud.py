@@ -1,0 +1,196 @@
+"""Depth images to per-mushroom point clouds: back-projection, filtering, sampling, normalising.
+
+Camera frame and intrinsics follow OpenCV: x right, y down, z forward (metres); pixel ``(u, v)``
+= (column, row); ``x = (u - cx) z / fx``, ``y = (v - cy) z / fy``. Depth is metric ``z`` (not
+range); ``0``, negative, NaN and inf depths are invalid and never produce points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import torch
+
+from perception.errors import NoEstimate, PerceptionConfigError
+
+#: Fewest valid points from which a pose is estimated; fewer gives :class:`NoEstimate`.
+MIN_POINTS: int = 16
+
+SamplingMethod = Literal["random", "fps"]
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics in pixels (OpenCV convention)."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+
+    def __post_init__(self) -> None:
+        for name in ("fx", "fy", "cx", "cy"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise PerceptionConfigError(name, f"must be a finite number, got {v!r}")
+        for name in ("fx", "fy"):
+            if getattr(self, name) <= 0:
+                raise PerceptionConfigError(name, f"must be > 0, got {getattr(self, name)!r}")
+
+    def matrix(self) -> np.ndarray:
+        """The 3x3 camera matrix ``K``."""
+        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1]], dtype=np.float64)
+
+
+def depth_to_points(
+    depth: np.ndarray,
+    intrinsics: Intrinsics,
+    mask: np.ndarray | None = None,
+    rgb: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Back-project the valid, masked pixels of ``depth`` to camera-frame points.
+
+    Args:
+        depth: ``(H, W)`` metric depth (m); ``<= 0``, NaN and inf are invalid.
+        intrinsics: pinhole intrinsics of the depth image.
+        mask: optional ``(H, W)`` boolean instance mask; all pixels when ``None``.
+        rgb: optional ``(H, W, 3)`` image (uint8 or float in [0, 1]).
+
+    Returns:
+        ``(points (N, 3) float32, colors (N, 3) float32 in [0, 1] or None)``; ``N`` may be 0.
+    """
+    depth = np.asarray(depth)
+    if depth.ndim != 2:
+        raise ValueError(f"depth: expected shape (H, W), got {depth.shape}")
+    valid = np.isfinite(depth) & (depth > 0)
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.shape != depth.shape:
+            raise ValueError(f"mask: shape {mask.shape} differs from depth shape {depth.shape}")
+        valid &= mask.astype(bool)
+    v, u = np.nonzero(valid)
+    z = depth[v, u].astype(np.float64)
+    x = (u - intrinsics.cx) * z / intrinsics.fx
+    y = (v - intrinsics.cy) * z / intrinsics.fy
+    points = np.stack((x, y, z), axis=-1).astype(np.float32)
+    colors = None
+    if rgb is not None:
+        rgb = np.asarray(rgb)
+        if rgb.shape[:2] != depth.shape or rgb.ndim != 3 or rgb.shape[2] < 3:
+            raise ValueError(f"rgb: expected shape {depth.shape + (3,)}, got {rgb.shape}")
+        c = rgb[v, u, :3].astype(np.float32)
+        colors = c / 255.0 if np.issubdtype(rgb.dtype, np.integer) else c
+    return points, colors
+
+
+def filter_finite(points: np.ndarray, colors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """Drop points with any NaN/inf coordinate (and their colours)."""
+    points = np.asarray(points, dtype=np.float32)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"points: expected shape (N, 3), got {points.shape}")
+    keep = np.isfinite(points).all(axis=1)
+    if colors is not None:
+        colors = np.asarray(colors, dtype=np.float32)
+        if colors.shape != points.shape:
+            raise ValueError(f"colors: shape {colors.shape} differs from points shape {points.shape}")
+        keep &= np.isfinite(colors).all(axis=1)
+        colors = colors[keep]
+    return points[keep], colors
+
+
+def farthest_point_indices(points: np.ndarray, n: int, start: int | None = None) -> np.ndarray:
+    """Indices of ``n`` farthest-point samples of ``points`` (``n <= len(points)``).
+
+    Starts from ``start`` or, by default, from the point farthest from the centroid, which makes
+    the selected *set* independent of the input order.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    m = len(pts)
+    if not 0 < n <= m:
+        raise ValueError(f"n: need 0 < n <= {m}, got {n}")
+    if start is None:
+        start = int(np.argmax(((pts - pts.mean(0)) ** 2).sum(1)))
+    idx = np.empty(n, dtype=np.int64)
+    dist = np.full(m, np.inf)
+    far = start
+    for i in range(n):
+        idx[i] = far
+        d = ((pts - pts[far]) ** 2).sum(1)
+        np.minimum(dist, d, out=dist)
+        far = int(np.argmax(dist))
+    return idx
+
+
+def sample_points(
+    points: np.ndarray,
+    n: int,
+    rng: np.random.Generator,
+    method: SamplingMethod = "random",
+    colors: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Sample exactly ``n`` points: without replacement when there are enough, else all points
+    plus random repeats. ``method="fps"`` uses farthest-point sampling (slower, even coverage)."""
+    m = len(points)
+    if m == 0:
+        raise NoEstimate(0, MIN_POINTS, "empty point cloud")
+    if m >= n:
+        idx = rng.choice(m, size=n, replace=False) if method == "random" else farthest_point_indices(points, n)
+    elif method in ("random", "fps"):
+        idx = np.concatenate((rng.permutation(m), rng.integers(0, m, size=n - m)))
+    else:
+        raise ValueError(f"method: expected 'random' or 'fps', got {method!r}")
+    return points[idx], None if colors is None else colors[idx]
+
+
+def normalize_points(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Centre on the centroid and scale into the unit sphere.
+
+    Returns ``(normalised (N, 3) float32, centre (3,), scale)`` with
+    ``points = normalised * scale + centre``. Rotation labels are unaffected.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    centre = pts.mean(axis=0)
+    scale = float(np.sqrt(((pts - centre) ** 2).sum(1)).max())
+    if not np.isfinite(scale) or scale <= 1e-9:
+        scale = 1.0
+    return ((pts - centre) / scale).astype(np.float32), centre, scale
+
+
+@dataclass(frozen=True)
+class PreparedCloud:
+    """A network-ready cloud: ``points`` normalised, plus what undoes the normalisation."""
+
+    points: np.ndarray  # (n, 3) float32, unit sphere
+    colors: np.ndarray | None  # (n, 3) float32 in [0, 1]
+    centre: np.ndarray  # (3,) camera frame, metres (centroid of the valid input points)
+    scale: float  # metres
+    num_valid: int  # valid points before sampling
+
+
+def prepare_cloud(
+    points: np.ndarray,
+    n: int,
+    rng: np.random.Generator,
+    colors: np.ndarray | None = None,
+    method: SamplingMethod = "random",
+    min_points: int = MIN_POINTS,
+) -> PreparedCloud:
+    """Filter, check, sample and normalise one cloud; raise :class:`NoEstimate` if fewer than
+    ``min_points`` finite points remain."""
+    points, colors = filter_finite(points, colors)
+    if len(points) < min_points:
+        raise NoEstimate(len(points), min_points)
+    centre = points.astype(np.float64).mean(0)
+    pts, cols = sample_points(points, n, rng, method, colors)
+    normed, _, scale = normalize_points(pts)
+    # Centre on the full cloud's centroid, not the sample's, for a stable reported centre.
+    normed = ((pts.astype(np.float64) - centre) / scale).astype(np.float32)
+    return PreparedCloud(normed, cols, centre, scale, len(points))
+
+
+def to_tensor(points: np.ndarray, colors: np.ndarray | None = None) -> torch.Tensor:
+    """``(N, 3)`` (+ ``(N, 3)`` colours) to a ``(N, 3 or 6)`` float32 tensor."""
+    feats = points if colors is None else np.concatenate((points, colors), axis=1)
+    return torch.from_numpy(np.ascontiguousarray(feats, dtype=np.float32))

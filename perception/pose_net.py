@@ -1,0 +1,175 @@
+"""PoseNet: a point-cloud backbone and a rotation head that outputs rotation matrices.
+
+The input is a normalised per-mushroom cloud ``(B, N, 3)`` in the camera frame (``(B, N, 6)``
+with RGB in [0, 1] when ``use_rgb``); the output is ``(B, 3, 3)`` camera-from-mushroom rotations
+whose third column is the stem axis. Heads: ``"6d"`` (Gram–Schmidt), ``"9d"`` (SVD),
+``"quat"`` (unit quaternion), ``"euler"`` (xyz angles). Checkpoints store the config, so a
+network is always rebuilt with the shape it was trained with.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import torch
+from torch import nn
+
+from perception import rotations as rot
+from perception.backbones import BACKBONES, build_backbone
+from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
+
+Head = Literal["6d", "9d", "quat", "euler"]
+HEAD_DIMS: dict[str, int] = {"6d": 6, "9d": 9, "quat": 4, "euler": 3}
+_DECODERS = {
+    "6d": rot.rotation_6d_to_matrix,
+    "9d": rot.rotation_9d_to_matrix,
+    "quat": rot.quaternion_to_matrix,
+    "euler": rot.euler_to_matrix,
+}
+CHECKPOINT_FORMAT = "sms3d-posenet"
+CHECKPOINT_VERSION = 1
+
+
+@dataclass(frozen=True)
+class PoseNetConfig:
+    """Shape of a :class:`PoseNet`; validated on construction."""
+
+    backbone: str = "point_transformer"
+    head: Head = "6d"
+    use_rgb: bool = False
+    num_points: int = 1024
+    hidden: int = 128  # width of the head MLP
+
+    def __post_init__(self) -> None:
+        if self.backbone not in BACKBONES:
+            raise PerceptionConfigError("backbone", f"expected one of {sorted(BACKBONES)}, got {self.backbone!r}")
+        if self.head not in HEAD_DIMS:
+            raise PerceptionConfigError("head", f"expected one of {sorted(HEAD_DIMS)}, got {self.head!r}")
+        if not isinstance(self.use_rgb, bool):
+            raise PerceptionConfigError("use_rgb", f"must be a bool, got {self.use_rgb!r}")
+        for name, lo in (("num_points", 16), ("hidden", 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise PerceptionConfigError(name, f"must be an int >= {lo}, got {v!r}")
+
+    @property
+    def in_channels(self) -> int:
+        return 6 if self.use_rgb else 3
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> PoseNetConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise PerceptionConfigError(unknown[0], "unknown PoseNetConfig field")
+        return cls(**d)
+
+
+class PoseNet(nn.Module):
+    """Backbone → MLP head → rotation representation → ``(B, 3, 3)`` rotation matrix."""
+
+    def __init__(self, config: PoseNetConfig | None = None, **kwargs: Any) -> None:
+        super().__init__()
+        if config is None:
+            config = PoseNetConfig(**kwargs)
+        elif kwargs:
+            config = dataclasses.replace(config, **kwargs)
+        self.config = config
+        self.backbone = build_backbone(config.backbone, config.in_channels, config.num_points)
+        c = self.backbone.out_dim
+        self.head = nn.Sequential(
+            nn.Linear(c, config.hidden), nn.ReLU(inplace=True), nn.Linear(config.hidden, HEAD_DIMS[config.head])
+        )
+        self._decode = _DECODERS[config.head]
+        if config.head == "6d":  # start at an upright mushroom seen from above: R = diag(1, -1, -1)
+            with torch.no_grad():
+                self.head[-1].bias.copy_(torch.tensor([1.0, 0, 0, 0, -1.0, 0]))
+
+    def raw(self, x: torch.Tensor) -> torch.Tensor:
+        """The head's raw representation ``(B, head_dim)``."""
+        if x.dim() != 3 or x.shape[-1] != self.config.in_channels:
+            raise ValueError(
+                f"x: expected (B, N, {self.config.in_channels}) for use_rgb={self.config.use_rgb}, got {tuple(x.shape)}"
+            )
+        return self.head(self.backbone(x))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``x (B, N, C)`` normalised points (+ rgb) → rotations ``(B, 3, 3)``."""
+        return self._decode(self.raw(x))
+
+
+def save_checkpoint(path: str | Path, model: PoseNet, extra: dict[str, Any] | None = None) -> None:
+    """Write ``{format, version, config, state_dict, extra}`` atomically (tmp file + ``os.replace``)."""
+    payload = {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "config": model.config.to_dict(),
+        "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+        "extra": extra or {},
+    }
+    atomic_torch_save(payload, path)
+
+
+def atomic_torch_save(obj: Any, path: str | Path) -> None:
+    """``torch.save`` to a temporary file in the same folder, then ``os.replace`` it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
+    os.close(fd)
+    try:
+        torch.save(obj, tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def read_checkpoint(path: str | Path) -> dict[str, Any]:
+    """Read and check a checkpoint file's envelope (no model is built)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - any unpickling failure is a format error
+        raise CheckpointFormatError(f"{path}: not a readable checkpoint ({exc})") from exc
+    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
+        raise CheckpointFormatError(f"{path}: not a {CHECKPOINT_FORMAT} checkpoint")
+    if payload.get("version") != CHECKPOINT_VERSION:
+        raise CheckpointFormatError(f"{path}: version {payload.get('version')!r}, expected {CHECKPOINT_VERSION}")
+    return payload
+
+
+def load_checkpoint(
+    path: str | Path, config: PoseNetConfig | None = None, map_location: str | torch.device = "cpu"
+) -> tuple[PoseNet, dict[str, Any]]:
+    """Rebuild the network stored at ``path``; returns ``(model in eval mode, extra)``.
+
+    If ``config`` is given, every field must equal the stored one, else
+    :class:`CheckpointMismatchError` names each differing field.
+    """
+    payload = read_checkpoint(path)
+    stored = PoseNetConfig.from_dict(payload["config"])
+    if config is not None:
+        mism = {
+            f.name: (getattr(stored, f.name), getattr(config, f.name))
+            for f in dataclasses.fields(PoseNetConfig)
+            if getattr(stored, f.name) != getattr(config, f.name)
+        }
+        if mism:
+            raise CheckpointMismatchError(str(path), mism)
+    model = PoseNet(stored)
+    try:
+        model.load_state_dict(payload["state_dict"])
+    except RuntimeError as exc:
+        raise CheckpointFormatError(f"{path}: weights do not fit config {stored} ({exc})") from exc
+    return model.to(map_location).eval(), payload.get("extra", {})

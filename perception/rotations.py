@@ -1,0 +1,207 @@
+"""Rotation representations, conversions and rotation losses in batched torch.
+
+Rotation matrices are the canonical form (``(..., 3, 3)``, columns are the rotated frame's axes);
+every other representation converts to and from them here. All functions accept any leading batch
+shape and are differentiable unless stated otherwise.
+
+Conventions:
+- 6D: the first two columns of ``R`` stacked as ``(..., 6) = [c0, c1]``; decoded by Gram–Schmidt
+  (Zhou et al., CVPR 2019, "On the Continuity of Rotation Representations in Neural Networks").
+- 9D: any ``(..., 9)`` row-major 3x3 matrix, projected to the nearest rotation by SVD with
+  ``det = +1`` (Levinson et al. 2020).
+- Quaternion: ``(w, x, y, z)``, scalar first; decoding normalises.
+- Euler: ``(roll, pitch, yaw)`` about x, y, z with ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``.
+- The stem axis of a mushroom is its local +z, i.e. the third column ``R[..., :, 2]``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import torch
+
+RotationLoss = Literal["geodesic", "axis", "geodesic+axis"]
+ROTATION_LOSSES: tuple[str, ...] = ("geodesic", "axis", "geodesic+axis")
+
+_DEFAULT_EPS = 1e-6
+
+
+def _check_last(x: torch.Tensor, shape: tuple[int, ...], name: str) -> None:
+    if not isinstance(x, torch.Tensor):
+        raise TypeError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
+    if tuple(x.shape[x.dim() - len(shape) :]) != shape or x.dim() < len(shape):
+        raise ValueError(f"{name}: expected shape (..., {', '.join(map(str, shape))}), got {tuple(x.shape)}")
+
+
+# --------------------------------------------------------------------------- 6D (Gram–Schmidt)
+def rotation_6d_to_matrix(d6: torch.Tensor) -> torch.Tensor:
+    """Decode ``(..., 6)`` = two 3-vectors into a rotation by Gram–Schmidt.
+
+    ``b1 = a1/|a1|``, ``b2 = normalise(a2 - (b1·a2) b1)``, ``b3 = b1 × b2``; the columns of the
+    result are ``[b1, b2, b3]`` so that ``matrix_to_rotation_6d`` inverts it exactly.
+    """
+    _check_last(d6, (6,), "d6")
+    a1, a2 = d6[..., :3], d6[..., 3:]
+    b1 = torch.nn.functional.normalize(a1, dim=-1, eps=_DEFAULT_EPS)
+    b2 = a2 - (b1 * a2).sum(-1, keepdim=True) * b1
+    b2 = torch.nn.functional.normalize(b2, dim=-1, eps=_DEFAULT_EPS)
+    b3 = torch.linalg.cross(b1, b2, dim=-1)
+    return torch.stack((b1, b2, b3), dim=-1)
+
+
+def matrix_to_rotation_6d(R: torch.Tensor) -> torch.Tensor:
+    """The first two columns of ``R`` as ``(..., 6)``."""
+    _check_last(R, (3, 3), "R")
+    return torch.cat((R[..., :, 0], R[..., :, 1]), dim=-1)
+
+
+# --------------------------------------------------------------------------- 9D (SVD)
+def rotation_9d_to_matrix(d9: torch.Tensor) -> torch.Tensor:
+    """Project ``(..., 9)`` (row-major 3x3) onto SO(3) by SVD, forcing ``det = +1``."""
+    _check_last(d9, (9,), "d9")
+    M = d9.reshape(*d9.shape[:-1], 3, 3)
+    U, _, Vh = torch.linalg.svd(M)
+    det = torch.det(U @ Vh)
+    D = torch.ones_like(M[..., 0])
+    D = torch.cat((D[..., :2], det.unsqueeze(-1)), dim=-1)
+    return U @ torch.diag_embed(D) @ Vh
+
+
+def matrix_to_rotation_9d(R: torch.Tensor) -> torch.Tensor:
+    """Flatten ``R`` row-major to ``(..., 9)``."""
+    _check_last(R, (3, 3), "R")
+    return R.reshape(*R.shape[:-2], 9)
+
+
+# --------------------------------------------------------------------------- quaternion
+def quaternion_to_matrix(q: torch.Tensor) -> torch.Tensor:
+    """``(w, x, y, z)`` (normalised here) to a rotation matrix."""
+    _check_last(q, (4,), "q")
+    q = torch.nn.functional.normalize(q, dim=-1, eps=_DEFAULT_EPS)
+    w, x, y, z = q.unbind(-1)
+    rows = (
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    )  # fmt: skip
+    return torch.stack(rows, dim=-1).reshape(*q.shape[:-1], 3, 3)
+
+
+def matrix_to_quaternion(R: torch.Tensor) -> torch.Tensor:
+    """Rotation matrix to a unit quaternion ``(w, x, y, z)`` with ``w >= 0``.
+
+    Uses the numerically stable branch on the largest of ``(w², x², y², z²)``.
+    """
+    _check_last(R, (3, 3), "R")
+    m = R
+    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    # 4 * squared components, each from the diagonal.
+    sq = torch.stack(
+        (1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22), -1
+    )
+    k = sq.argmax(-1, keepdim=True)
+    r = torch.sqrt(torch.clamp(sq.gather(-1, k), min=1e-12)).squeeze(-1)  # 2*|component k|
+    a = m[..., 2, 1] - m[..., 1, 2]
+    b = m[..., 0, 2] - m[..., 2, 0]
+    c = m[..., 1, 0] - m[..., 0, 1]
+    d = m[..., 0, 1] + m[..., 1, 0]
+    e = m[..., 0, 2] + m[..., 2, 0]
+    f = m[..., 1, 2] + m[..., 2, 1]
+    cand = torch.stack(
+        (
+            torch.stack((r, a / r, b / r, c / r), -1),
+            torch.stack((a / r, r, d / r, e / r), -1),
+            torch.stack((b / r, d / r, r, f / r), -1),
+            torch.stack((c / r, e / r, f / r, r), -1),
+        ),
+        -2,
+    ) * 0.5
+    q = cand.gather(-2, k.unsqueeze(-1).expand(*k.shape[:-1], 1, 4)).squeeze(-2)
+    q = torch.nn.functional.normalize(q, dim=-1)
+    return torch.where(q[..., :1] < 0, -q, q)
+
+
+# --------------------------------------------------------------------------- Euler xyz
+def euler_to_matrix(e: torch.Tensor) -> torch.Tensor:
+    """``(roll, pitch, yaw)`` to ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``."""
+    _check_last(e, (3,), "euler")
+    cr, sr = torch.cos(e[..., 0]), torch.sin(e[..., 0])
+    cp, sp = torch.cos(e[..., 1]), torch.sin(e[..., 1])
+    cy, sy = torch.cos(e[..., 2]), torch.sin(e[..., 2])
+    rows = (
+        cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
+        sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
+        -sp, cp * sr, cp * cr,
+    )  # fmt: skip
+    return torch.stack(rows, dim=-1).reshape(*e.shape[:-1], 3, 3)
+
+
+def matrix_to_euler(R: torch.Tensor) -> torch.Tensor:
+    """Inverse of :func:`euler_to_matrix`; pitch in ``[-pi/2, pi/2]``.
+
+    Not differentiable-safe at gimbal lock (``|pitch| = pi/2``), where roll is set to zero.
+    """
+    _check_last(R, (3, 3), "R")
+    sp = torch.clamp(-R[..., 2, 0], -1.0, 1.0)
+    pitch = torch.asin(sp)
+    cp = torch.sqrt(torch.clamp(R[..., 0, 0] ** 2 + R[..., 1, 0] ** 2, min=0.0))
+    regular = cp > 1e-6
+    roll = torch.where(regular, torch.atan2(R[..., 2, 1], R[..., 2, 2]), torch.zeros_like(sp))
+    yaw = torch.where(
+        regular,
+        torch.atan2(R[..., 1, 0], R[..., 0, 0]),
+        torch.atan2(-R[..., 0, 1], R[..., 1, 1]),
+    )
+    return torch.stack((roll, pitch, yaw), dim=-1)
+
+
+# --------------------------------------------------------------------------- errors and losses
+def geodesic_angle(R1: torch.Tensor, R2: torch.Tensor, eps: float = 1e-7) -> torch.Tensor:
+    """Angle (rad) of ``R1ᵀ R2``: ``arccos((tr - 1)/2)``, the argument clamped to
+    ``[-1 + eps, 1 - eps]`` so the gradient stays finite at 0 and pi."""
+    _check_last(R1, (3, 3), "R1")
+    _check_last(R2, (3, 3), "R2")
+    tr = (R1 * R2).sum(dim=(-2, -1))  # trace(R1ᵀ R2)
+    return torch.acos(torch.clamp((tr - 1.0) * 0.5, -1.0 + eps, 1.0 - eps))
+
+
+def axis_angle_error(R1: torch.Tensor, R2: torch.Tensor, eps: float = 1e-7) -> torch.Tensor:
+    """Angle (rad) between the stem axes (third columns) of ``R1`` and ``R2``.
+
+    Invariant to yaw about the stem: the symmetry-aware error for an axisymmetric mushroom.
+    """
+    _check_last(R1, (3, 3), "R1")
+    _check_last(R2, (3, 3), "R2")
+    a = torch.nn.functional.normalize(R1[..., :, 2], dim=-1)
+    b = torch.nn.functional.normalize(R2[..., :, 2], dim=-1)
+    return torch.acos(torch.clamp((a * b).sum(-1), -1.0 + eps, 1.0 - eps))
+
+
+def rotation_loss(pred: torch.Tensor, target: torch.Tensor, kind: RotationLoss = "geodesic") -> torch.Tensor:
+    """Mean rotation loss in radians.
+
+    - ``"geodesic"``: full SO(3) angle — penalises yaw about the stem as well.
+    - ``"axis"``: stem-axis angle only — yaw-invariant (symmetry-aware) loss.
+    - ``"geodesic+axis"``: their sum; keeps yaw supervision where it is observable while
+      weighting the axis, which a picker needs, twice.
+    """
+    if kind == "geodesic":
+        return geodesic_angle(pred, target).mean()
+    if kind == "axis":
+        return axis_angle_error(pred, target).mean()
+    if kind == "geodesic+axis":
+        return geodesic_angle(pred, target).mean() + axis_angle_error(pred, target).mean()
+    raise ValueError(f"loss: expected one of {ROTATION_LOSSES}, got {kind!r}")
+
+
+def random_rotations(n: int, generator: torch.Generator | None = None, dtype=torch.float32) -> torch.Tensor:
+    """``n`` rotations drawn uniformly (Haar) from SO(3) via normalised Gaussian quaternions."""
+    q = torch.randn(n, 4, generator=generator, dtype=torch.float64)
+    return quaternion_to_matrix(q).to(dtype)
+
+
+#: Mean geodesic error of a uniformly random guess: ``pi/2 + 2/pi`` rad ≈ 126.5°.
+CHANCE_GEODESIC_DEG: float = math.degrees(math.pi / 2 + 2 / math.pi)
+#: Mean angle between two uniformly random unit vectors: 90°.
+CHANCE_AXIS_DEG: float = 90.0
