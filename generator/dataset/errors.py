@@ -15,6 +15,10 @@ class DatasetWriteError(DatasetError):
     def __init__(self, path: str | Path, message: str) -> None:
         super().__init__(f"{path}: {message}")
         self.path = Path(path)
+        self.message = message
+
+    def __reduce__(self):  # picklable across worker processes
+        return (type(self), (str(self.path), self.message))
 
 
 class CorruptFileError(DatasetError):
@@ -23,6 +27,10 @@ class CorruptFileError(DatasetError):
     def __init__(self, path: str | Path, message: str) -> None:
         super().__init__(f"{path}: {message}")
         self.path = Path(path)
+        self.message = message
+
+    def __reduce__(self):
+        return (type(self), (str(self.path), self.message))
 
 
 class ManifestMismatchError(DatasetError):

@@ -11,11 +11,14 @@ context is rebuilt for each new model.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
-import mujoco
 import numpy as np
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+import mujoco  # noqa: E402
 
 from generator.camera import Intrinsics, camera_intrinsics, project, world_from_camera_cv
 from generator.dataset.options import DatasetOptions
@@ -173,16 +176,34 @@ class SceneRenderer:
                 group_rects.append([(u0, v0, u1, v1)])
         saved = model.geom_group.copy()
         masks: dict[int, np.ndarray] = {}
+        ctx, mjv_scene = r._mjr_context, r.scene
+        full = mujoco.MjrRect(0, 0, w, h)
         try:
             for members in groups:
                 model.geom_group[:] = _HIDDEN_GROUP
                 model.geom_group[[cap_ids[i] for i in members]] = 0
                 r.update_scene(data, CAMERA)
-                seg = r.render()[..., 0]
+                mjv_scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = True
+                mjv_scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = True
+                segid = {g.objid: g.segid + 1 for g in mjv_scene.geoms[:mjv_scene.ngeom]
+                         if g.objtype == int(mujoco.mjtObj.mjOBJ_GEOM)}
+                if r._gl_context:
+                    r._gl_context.make_current()
+                mujoco.mjr_render(full, mjv_scene, ctx)
+                # Read back only each cap's rectangle (OpenGL rows run bottom to top).
                 for iid in members:
-                    m = seg == cap_ids[iid]
-                    if m.any():
+                    u0, v0, u1, v1 = rects[iid]
+                    buf = np.empty((v1 - v0, u1 - u0, 3), dtype=np.uint8)
+                    mujoco.mjr_readPixels(buf, None, mujoco.MjrRect(u0, h - v1, u1 - u0, v1 - v0), ctx)
+                    code = buf[::-1].astype(np.int32)
+                    code = code[..., 0] + (code[..., 1] << 8) + (code[..., 2] << 16)
+                    crop = code == segid[cap_ids[iid]]
+                    if crop.any():
+                        m = np.zeros((h, w), dtype=bool)
+                        m[v0:v1, u0:u1] = crop
                         masks[iid] = m
         finally:
             model.geom_group[:] = saved
+            mjv_scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = False
+            mjv_scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = False
         return dict(sorted(masks.items()))
