@@ -1,0 +1,22 @@
+"""Gymnasium environments for robotic mushroom picking (``SMS3DPick-v0``, ``SMS3DPickSparse-v0``)."""
+
+from gymnasium.envs.registration import register, registry
+
+from sms3d_env.controller import ControllerConfig, IKController
+from sms3d_env.physics import PickPhysicsParams
+from sms3d_env.pick_env import FAILURE_CAUSES, SMS3DPickEnv
+from sms3d_env.pose_source import NoisyPose, OraclePose, PoseEstimate, PoseSource, make_pose_source
+from sms3d_env.robot import RobotConfig
+from sms3d_env.scripted_picker import ScriptedPicker, run_episode
+
+for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
+                 ("SMS3DPickSparse-v0", {"reward_type": "sparse"})):
+    if _id not in registry:
+        register(id=_id, entry_point="sms3d_env.pick_env:SMS3DPickEnv", max_episode_steps=250,
+                 kwargs=_kw)
+
+__all__ = [
+    "FAILURE_CAUSES", "ControllerConfig", "IKController", "NoisyPose", "OraclePose",
+    "PickPhysicsParams", "PoseEstimate", "PoseSource", "RobotConfig", "SMS3DPickEnv",
+    "ScriptedPicker", "make_pose_source", "run_episode",
+]

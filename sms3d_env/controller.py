@@ -1,0 +1,132 @@
+"""Differential-IK tool controller: a normalised tool twist in, joint position targets out.
+
+Each control step, mink solves one QP (FrameTask on the tool site, PostureTask, joint position and
+velocity limits, solver daqp) on an arm-only model, so its cost does not grow with the number of
+mushrooms. The IK state is the *commanded* configuration; the actuators track it. When contact
+stops the arm, the command may lead the measured joints by at most ``max_lead`` rad, which bounds
+how hard the tool can press.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mink
+import mujoco
+import numpy as np
+
+from sms3d_env.robot import ARM_JOINTS, PREFIX, TOOL_SITE, RobotConfig, arm_only_model
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Speeds and IK weights.
+
+    Attributes:
+        max_linear_speed: tool speed at |action| = 1 (m/s). ASSUMPTION: a safe speed near produce.
+        max_angular_speed: tool angular speed at |action| = 1 (rad/s). ASSUMPTION.
+        max_joint_speed: per-joint velocity limit in the IK (rad/s); Jaco's rating is ~0.8-1.0.
+        max_lead: largest gap between commanded and measured joint angle (rad).
+        position_cost, orientation_cost, posture_cost: mink task weights.
+        damping: Levenberg-Marquardt damping of the IK QP.
+    """
+
+    max_linear_speed: float = 0.12
+    max_angular_speed: float = 0.8
+    max_joint_speed: float = 1.0
+    max_lead: float = 0.03
+    position_cost: float = 1.0
+    orientation_cost: float = 0.3
+    posture_cost: float = 1e-3
+    damping: float = 1e-4
+
+    def __post_init__(self) -> None:
+        for name in ("max_linear_speed", "max_angular_speed", "max_joint_speed", "max_lead"):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v <= 0:
+                raise ValueError(f"ControllerConfig.{name} must be > 0, got {v!r}")
+
+
+def _rotvec_to_mat(w: np.ndarray) -> np.ndarray:
+    q = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(q, w / max(np.linalg.norm(w), 1e-12), float(np.linalg.norm(w)))
+    r = np.zeros(9)
+    mujoco.mju_quat2Mat(r, q)
+    return r.reshape(3, 3)
+
+
+class IKController:
+    """Turns world-frame tool twists into commanded arm joint angles with mink."""
+
+    def __init__(self, robot: RobotConfig, cfg: ControllerConfig, dt: float) -> None:
+        self.cfg, self.dt = cfg, dt
+        self.model = arm_only_model(robot)
+        self.configuration = mink.Configuration(self.model)
+        self.site = PREFIX + TOOL_SITE
+        self.arm_qadr = np.array([self.model.jnt_qposadr[self.model.joint(PREFIX + j).id]
+                                  for j in ARM_JOINTS])
+        self.frame_task = mink.FrameTask(self.site, "site", position_cost=cfg.position_cost,
+                                         orientation_cost=cfg.orientation_cost, lm_damping=1e-3)
+        self.posture_task = mink.PostureTask(self.model, cost=cfg.posture_cost)
+        vel = {PREFIX + j: cfg.max_joint_speed for j in ARM_JOINTS}
+        self.limits = [mink.ConfigurationLimit(self.model), mink.VelocityLimit(self.model, vel)]
+        self.q_home = self.model.qpos0.copy()
+
+    def reset(self, q_arm: np.ndarray, q_home: np.ndarray | None = None) -> None:
+        """Set the commanded configuration (and the posture target) to ``q_arm``."""
+        q = self.model.qpos0.copy()
+        q[self.arm_qadr] = q_arm
+        self.configuration.update(q)
+        home = q.copy()
+        if q_home is not None:
+            home[self.arm_qadr] = q_home
+        self.posture_task.set_target(home)
+
+    @property
+    def q_cmd(self) -> np.ndarray:
+        return self.configuration.q[self.arm_qadr].copy()
+
+    def tool_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Commanded tool site position and rotation matrix."""
+        d = self.configuration.data
+        sid = self.model.site(self.site).id
+        return d.site_xpos[sid].copy(), d.site_xmat[sid].reshape(3, 3).copy()
+
+    def solve_to(self, pos: np.ndarray, rot: np.ndarray, dt: float | None = None) -> np.ndarray:
+        """One IK step toward a tool pose; returns the new commanded arm angles."""
+        dt = self.dt if dt is None else dt
+        target = mink.SE3.from_rotation_and_translation(mink.SO3.from_matrix(rot), pos)
+        self.frame_task.set_target(target)
+        v = mink.solve_ik(self.configuration, [self.frame_task, self.posture_task], dt, "daqp",
+                          damping=self.cfg.damping, limits=self.limits)
+        self.configuration.integrate_inplace(v, dt)
+        return self.q_cmd
+
+    def step(self, twist: np.ndarray, q_measured: np.ndarray) -> np.ndarray:
+        """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period."""
+        lead = np.clip(self.q_cmd - q_measured, -self.cfg.max_lead, self.cfg.max_lead)
+        if not np.allclose(lead, self.q_cmd - q_measured):
+            q = self.configuration.q.copy()
+            q[self.arm_qadr] = q_measured + lead
+            self.configuration.update(q)
+        pos, rot = self.tool_pose()
+        pos = pos + twist[:3] * self.dt
+        rot = _rotvec_to_mat(twist[3:] * self.dt) @ rot
+        return self.solve_to(pos, rot)
+
+    def reaches(self, pos: np.ndarray, rot: np.ndarray, q_start: np.ndarray, iters: int = 60,
+                pos_tol: float = 0.004, ang_tol_deg: float = 4.0) -> tuple[bool, np.ndarray]:
+        """Whether IK from ``q_start`` converges to the pose (state restored afterwards)."""
+        saved = self.configuration.q.copy()
+        self.reset(q_start)
+        ok = False
+        for _ in range(iters):
+            self.solve_to(pos, rot, dt=0.05)
+            p, r = self.tool_pose()
+            ang = np.degrees(np.arccos(np.clip((np.trace(rot.T @ r) - 1) / 2, -1, 1)))
+            if np.linalg.norm(p - pos) < pos_tol and ang < ang_tol_deg:
+                ok = True
+                break
+        q = self.q_cmd
+        self.configuration.update(saved)
+        return ok, q

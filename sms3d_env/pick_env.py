@@ -1,0 +1,520 @@
+"""``SMS3DPick-v0``: pick one mushroom from a synthetic bed with a suction tool on a Kinova Jaco.
+
+Per reset: a seeded scene (or one from a list) becomes an ``MjSpec``; the arm is attached, one
+inactive grip weld per mushroom is added, and the target is chosen. Per step: the normalised
+action becomes a tool twist, mink turns it into joint targets, and ``substeps`` physics steps run
+with the picking model of ``physics.py`` checked after each.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from sms3d_env import physics as ph
+from sms3d_env.controller import ControllerConfig, IKController
+from sms3d_env.physics import PickPhysicsParams
+from sms3d_env.pose_source import PoseEstimate, PoseSource, make_pose_source
+from sms3d_env.rewards import REWARD_TYPES, RewardState, compute_reward
+from sms3d_env.robot import (
+    ARM_JOINTS,
+    CUP_BODY,
+    CUP_GEOM,
+    PREFIX,
+    TOOL_SITE,
+    RobotConfig,
+    attach_robot,
+)
+from sms3d_env.targets import Reachability, select_target
+
+FAILURE_CAUSES = ("no_seal", "grip_lost", "not_detached", "bruised", "neighbour_disturbed",
+                  "unreachable", "timeout", "unstable_simulation")
+_EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+
+
+@dataclass
+class _EpisodeState:
+    target: int = 0
+    reachable: bool = True
+    estimate: PoseEstimate | None = None
+    grip: int = -1  # mushroom id held by the cup, -1 if none
+    grip_util: float = 0.0
+    suction_on: bool = False
+    ever_sealed_target: bool = False
+    target_detached: bool = False
+    grip_lost: bool = False
+    bruised: set[int] = field(default_factory=set)
+    detached: set[int] = field(default_factory=set)
+    disturbed: set[int] = field(default_factory=set)
+    unstable: bool = False
+    max_lift: float = 0.0
+
+
+class SMS3DPickEnv(gym.Env):
+    """Gymnasium environment for suction picking of one target mushroom.
+
+    Args:
+        render_mode: ``"rgb_array"`` or ``"depth_array"`` (metric depth in metres).
+        scene_config: ``generator.SceneConfig`` for a new seeded scene per reset (default: 25
+            mushrooms). Ignored when ``scenes`` is given.
+        scenes: a fixed list of ``generator.Scene`` objects; one is drawn per reset
+            (``options={"scene": k}`` picks one).
+        pose_source: ``"oracle"``, ``"noisy"`` or a callable ``(scene, id, rng) -> PoseEstimate``.
+        pose_error_deg, position_noise: the ``"noisy"`` source's rotation error (deg) and
+            position noise standard deviation (m).
+        target_rule: ``"tallest"``, ``"largest"``, ``"index"`` (with ``target_index``),
+            ``"random"``; ``options={"target": i}`` overrides it for one reset.
+        reward_type: ``"dense"`` or ``"sparse"``.
+        control_dt, substeps: control period (s) and physics steps per control step.
+        image_obs: add ``rgb`` (uint8) and ``depth`` (float32, m) of ``image_size`` to the
+            observation, from ``camera``.
+    """
+
+    metadata = {"render_modes": ["rgb_array", "depth_array"], "render_fps": 25}
+
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        scene_config: Any = None,
+        scenes: Sequence[Any] | None = None,
+        pose_source: str | PoseSource = "oracle",
+        pose_error_deg: float = 0.0,
+        position_noise: float = 0.0,
+        target_rule: str = "tallest",
+        target_index: int = 0,
+        reward_type: str = "dense",
+        physics: PickPhysicsParams | None = None,
+        robot: RobotConfig | None = None,
+        controller: ControllerConfig | None = None,
+        control_dt: float = 0.04,
+        substeps: int = 20,
+        image_obs: bool = False,
+        image_size: tuple[int, int] = (64, 64),
+        camera: str = "overhead",
+        render_size: tuple[int, int] = (480, 640),
+        max_tilt_deg: float = 45.0,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if reward_type not in REWARD_TYPES:
+            raise ValueError(f"reward_type must be one of {REWARD_TYPES}, got {reward_type!r}")
+        if not (np.isfinite(control_dt) and control_dt > 0):
+            raise ValueError(f"control_dt must be > 0, got {control_dt!r}")
+        if not isinstance(substeps, int) or substeps < 1:
+            raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
+        self.robot_cfg = robot or RobotConfig()
+        if self.robot_cfg.tool != "suction":
+            raise ValueError("SMS3DPick-v0 models suction picking only: RobotConfig.tool must be 'suction'")
+        if scenes is not None and len(scenes) == 0:
+            raise ValueError("scenes must be a non-empty sequence")
+        self.render_mode = render_mode
+        self.scene_config = scene_config
+        self.scenes = list(scenes) if scenes is not None else None
+        self.pose_source = make_pose_source(pose_source, pose_error_deg, position_noise)
+        self.target_rule, self.target_index = target_rule, target_index
+        self.reward_type = reward_type
+        self.params = physics or PickPhysicsParams(cup_radius=self.robot_cfg.cup_radius)
+        self.ctrl_cfg = controller or ControllerConfig()
+        self.control_dt, self.substeps = float(control_dt), substeps
+        self.image_obs, self.image_size = image_obs, tuple(image_size)
+        self.camera, self.render_size = camera, tuple(render_size)
+        self.max_tilt_deg = max_tilt_deg
+
+        self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
+        self.home_q = np.asarray(self.robot_cfg.home_q, float)
+        self.reach = Reachability(self.ik.model, self.ik.arm_qadr, self.home_q)
+        self.action_space = spaces.Box(-1.0, 1.0, (7,), np.float32)
+        inf = np.inf
+        obs = {
+            "joint_pos": spaces.Box(-inf, inf, (6,), np.float64),
+            "joint_vel": spaces.Box(-inf, inf, (6,), np.float64),
+            "tool_pose": spaces.Box(-inf, inf, (7,), np.float64),
+            "suction": spaces.Box(-inf, inf, (3,), np.float64),
+            "target_pose": spaces.Box(-inf, inf, (6,), np.float64),
+            "target_rel": spaces.Box(-inf, inf, (3,), np.float64),
+        }
+        if image_obs:
+            h, w = self.image_size
+            obs["rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
+            obs["depth"] = spaces.Box(0.0, inf, (h, w, 1), np.float32)
+        self.observation_space = spaces.Dict(obs)
+        self.model: mujoco.MjModel | None = None
+        self.data: mujoco.MjData | None = None
+        self.scene: Any = None
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._ep = _EpisodeState()
+
+    # ------------------------------------------------------------------ model assembly
+    def _scene_for_reset(self, options: dict[str, Any]) -> Any:
+        if self.scenes is not None:
+            k = options.get("scene")
+            k = int(self.np_random.integers(len(self.scenes))) if k is None else int(k)
+            return self.scenes[k]
+        import generator
+
+        cfg = self.scene_config
+        if cfg is None:
+            cfg = generator.SceneConfig().replace(placement__num_mushrooms=25)
+        return generator.generate_scene(cfg, seed=int(self.np_random.integers(2**31 - 1)))
+
+    def _build(self, scene: Any) -> None:
+        from generator.mjcf import scene_to_spec
+
+        spec = scene_to_spec(scene)
+        attach_robot(spec, self.robot_cfg)
+        n = len(scene.instances)
+        for i in range(n):
+            spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
+                              objtype=mujoco.mjtObj.mjOBJ_BODY, name1=PREFIX + CUP_BODY,
+                              name2=f"mushroom_{i}", active=False)
+        spec.worldbody.add_camera(name="side", pos=[0.0, -0.75, 0.45],
+                                  xyaxes=[1, 0, 0, 0, 0.6, 0.8], fovy=50)
+        spec.option.timestep = self.control_dt / self.substeps
+        self._disown_renderers()
+        m = spec.compile()
+        d = mujoco.MjData(m)
+        terrain = m.geom("terrain").id
+        m.geom_contype[terrain], m.geom_conaffinity[terrain] = ph.SOIL_CONTYPE, ph.SOIL_CONAFFINITY
+        self.body_ids = np.array([m.body(f"mushroom_{i}").id for i in range(n)])
+        self.dofadr = np.array([m.jnt_dofadr[m.joint(f"mushroom_{i}_joint").id] for i in range(n)])
+        self.cap_geoms = np.array([m.geom(f"mushroom_{i}_cap").id for i in range(n)])
+        self.stem_geoms = np.array([m.geom(f"mushroom_{i}_stem").id for i in range(n)])
+        self.cap_top_sites = np.array([m.site(f"mushroom_{i}_cap_top").id for i in range(n)])
+        self.root_eq = np.array([m.equality(f"mushroom_{i}_root").id for i in range(n)])
+        self.grip_eq = np.array([m.equality(f"grip_{i}").id for i in range(n)])
+        self.is_root_eq = np.zeros(m.neq, bool)
+        self.is_root_eq[self.root_eq] = True
+        self.geom_mushroom = np.full(m.ngeom, -1)
+        self.geom_mushroom[self.cap_geoms] = np.arange(n)
+        self.geom_mushroom[self.stem_geoms] = np.arange(n)
+        self.is_cap = np.zeros(m.ngeom, bool)
+        self.is_cap[self.cap_geoms] = True
+        for g in np.concatenate([self.cap_geoms, self.stem_geoms]):
+            m.geom_contype[g], m.geom_conaffinity[g] = ph.ROOTED_CONTYPE, ph.ROOTED_CONAFFINITY
+        # The broadphase prunes with per-body unions of the geom masks: keep them in step.
+        m.body_contype[self.body_ids] = ph.ROOTED_CONTYPE
+        m.body_conaffinity[self.body_ids] = ph.ROOTED_CONAFFINITY
+        m.body_contype[0] |= ph.SOIL_CONTYPE
+        m.body_conaffinity[0] |= ph.SOIL_CONAFFINITY
+        self.robot_geom = np.zeros(m.ngeom, bool)
+        self.robot_geom[[g for g in range(m.ngeom) if m.geom(g).name.startswith(PREFIX)]] = True
+        self.cup_geom = m.geom(PREFIX + CUP_GEOM).id
+        self.cup_body = m.body(PREFIX + CUP_BODY).id
+        self.tool_site = m.site(PREFIX + TOOL_SITE).id
+        self.arm_qadr = np.array([m.jnt_qposadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS])
+        self.arm_dadr = np.array([m.jnt_dofadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS])
+        self.cap_radius = np.array([inst.cap_diameter / 2 for inst in scene.instances])
+        self._qfrc = np.zeros(m.nv)
+        self.model, self.data, self.scene = m, d, scene
+
+    # ------------------------------------------------------------------ gym API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        scene = self._scene_for_reset(options)
+        self._build(scene)
+        m, d = self.model, self.data
+        ep = _EpisodeState()
+        if "target" in options:
+            ep.target, ep.reachable = select_target(scene, "index", self.np_random, self.reach,
+                                                    index=int(options["target"]),
+                                                    max_tilt_deg=self.max_tilt_deg)
+        else:
+            ep.target, ep.reachable = select_target(scene, self.target_rule, self.np_random,
+                                                    self.reach, index=self.target_index,
+                                                    max_tilt_deg=self.max_tilt_deg)
+        ep.estimate = self.pose_source(scene, ep.target, self.np_random)
+        self._ep = ep
+        d.qpos[self.arm_qadr] = self.home_q
+        d.ctrl[:6] = self.home_q
+        self.ik.reset(self.home_q, self.home_q)
+        mujoco.mj_forward(m, d)
+        for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
+            mujoco.mj_step(m, d)
+        self.init_xpos = d.xpos[self.body_ids].copy()
+        self.init_cap_top = d.site_xpos[self.cap_top_sites[ep.target]].copy()
+        self.steps = 0
+        return self._obs(), self._info()
+
+    def step(self, action: np.ndarray):
+        if self.data is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (7,):
+            raise ValueError(f"action must have shape (7,), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action contains NaN or inf: {a.tolist()}")
+        a = np.clip(a, -1.0, 1.0)
+        m, d, ep = self.model, self.data, self._ep
+        twist = np.concatenate([a[:3] * self.ctrl_cfg.max_linear_speed,
+                                a[3:6] * self.ctrl_cfg.max_angular_speed])
+        ep.suction_on = bool(a[6] > 0)
+        if not ep.suction_on and ep.grip >= 0:
+            self._release()
+        try:
+            d.ctrl[:6] = self.ik.step(twist, d.qpos[self.arm_qadr].copy())
+        except Exception:  # mink raises when the QP has no solution: hold the last command
+            pass
+        for _ in range(self.substeps):
+            mujoco.mj_step(m, d)
+            if (d.warning[int(mujoco.mjtWarning.mjWARN_BADQACC)].number > 0
+                    or not np.all(np.isfinite(d.qpos))):
+                ep.unstable = True
+                break
+            if d.ncon > 0 or ep.grip >= 0:
+                self._picking_physics()
+        self.steps += 1
+        self._update_neighbours()
+        success = self._success()
+        terminated = success or bool(ep.bruised) or (ep.target_detached and ep.grip_lost)
+        truncated = ep.unstable
+        reward = self._reward(success)
+        info = self._info(success)
+        if ep.unstable:
+            mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
+            mujoco.mj_forward(m, d)
+        return self._obs(), reward, terminated, truncated, info
+
+    # ------------------------------------------------------------------ physics
+    def _picking_physics(self) -> None:
+        m, d, ep, p = self.model, self.data, self._ep, self.params
+        touched: set[int] = set()
+        ncon = d.ncon
+        if ncon:
+            geoms = d.contact.geom[:ncon]
+            mush = self.geom_mushroom[geoms]
+            rows = np.nonzero((mush >= 0).any(axis=1))[0]
+            f6 = np.zeros(6)
+            for c in rows:
+                g1, g2 = geoms[c]
+                mujoco.mj_contactForce(m, d, int(c), f6)
+                fn = abs(f6[0])
+                for g, other in ((g1, g2), (g2, g1)):
+                    k = self.geom_mushroom[g]
+                    if k < 0:
+                        continue
+                    if self.robot_geom[other]:
+                        touched.add(int(k))
+                    if self.is_cap[g] and fn > p.bruise_force:
+                        ep.bruised.add(int(k))
+                    if (other == self.cup_geom and self.is_cap[g] and ep.suction_on
+                            and ep.grip < 0 and fn >= p.seal_force):
+                        normal = d.contact.frame[c][:3] * (1.0 if g1 == self.cup_geom else -1.0)
+                        if self._seals(int(k), d.contact.pos[c], normal):
+                            self._grip(int(k))
+        if ep.grip >= 0:
+            touched.add(ep.grip)
+        rooted = [k for k in touched if d.eq_active[self.root_eq[k]]]
+        if rooted:
+            self._check_roots(rooted)
+        if ep.grip >= 0:
+            self._check_grip()
+
+    def _seals(self, k: int, point: np.ndarray, normal_cup_to_cap: np.ndarray) -> bool:
+        """Seal test: cup axis vs. cap normal at the contact, and contact on the cap top."""
+        d, p = self.data, self.params
+        z = d.site_xmat[self.tool_site].reshape(3, 3)[:, 2]
+        cos = float(z @ normal_cup_to_cap)
+        if cos < np.cos(np.deg2rad(p.seal_angle_deg)):
+            return False
+        b = self.body_ids[k]
+        axis = d.xmat[b].reshape(3, 3)[:, 2]
+        rel = point - d.xpos[b]
+        radial = np.linalg.norm(rel - (rel @ axis) * axis)
+        return bool(radial <= p.seal_region * self.cap_radius[k])
+
+    def _grip(self, k: int) -> None:
+        m, d, ep = self.model, self.data, self._ep
+        e = self.grip_eq[k]
+        m.eq_data[e, :3] = 0.0
+        m.eq_data[e, 3:10] = ph.weld_relpose(m, d, self.cup_body, self.body_ids[k])
+        m.eq_data[e, 10] = 1.0
+        d.eq_active[e] = 1
+        ep.grip = k
+        if k == ep.target:
+            ep.ever_sealed_target = True
+
+    def _release(self) -> None:
+        self.data.eq_active[self.grip_eq[self._ep.grip]] = 0
+        self._ep.grip = -1
+        self._ep.grip_util = 0.0
+
+    def _eq_wrench(self, rows: np.ndarray) -> np.ndarray:
+        return ph.wrench_from_rows(self.model, self.data, rows, self._qfrc)
+
+    def _check_roots(self, ks: list[int]) -> None:
+        m, d, ep = self.model, self.data, self._ep
+        nefc = d.nefc
+        eq = d.efc_type[:nefc] == _EQ
+        rows = eq & self.is_root_eq[np.where(eq, d.efc_id[:nefc], 0)]
+        q = self._eq_wrench(rows)
+        for k in ks:
+            rot = d.xmat[self.body_ids[k]].reshape(3, 3)
+            force, torque = ph.free_body_wrench(q, self.dofadr[k], rot)
+            axis = rot[:, 2]
+            tension = max(0.0, -float(force @ axis))
+            tw = float(torque @ axis)
+            bend = float(np.linalg.norm(torque - tw * axis))
+            u = ph.root_utilisation(np.array(tension), np.array(bend), np.array(abs(tw)), self.params)
+            if u >= 1.0:
+                d.eq_active[self.root_eq[k]] = 0
+                for g in (self.cap_geoms[k], self.stem_geoms[k]):
+                    m.geom_contype[g], m.geom_conaffinity[g] = ph.FREE_CONTYPE, ph.FREE_CONAFFINITY
+                b = self.body_ids[k]
+                m.body_contype[b], m.body_conaffinity[b] = ph.FREE_CONTYPE, ph.FREE_CONAFFINITY
+                ep.detached.add(k)
+                if k == ep.target:
+                    ep.target_detached = True
+
+    def _check_grip(self) -> None:
+        d, ep = self.data, self._ep
+        k = ep.grip
+        nefc = d.nefc
+        rows = (d.efc_type[:nefc] == _EQ) & (d.efc_id[:nefc] == self.grip_eq[k])  # eq ids only
+        q = self._eq_wrench(rows)
+        b = self.body_ids[k]
+        force, torque = ph.free_body_wrench(q, self.dofadr[k], d.xmat[b].reshape(3, 3))
+        pc = d.site_xpos[self.tool_site]
+        torque_c = torque + np.cross(d.xpos[b] - pc, force)
+        z = d.site_xmat[self.tool_site].reshape(3, 3)[:, 2]
+        fz = float(force @ z)
+        tz = float(torque_c @ z)
+        u = ph.grip_utilisation(max(0.0, -fz), float(np.linalg.norm(force - fz * z)),
+                                float(np.linalg.norm(torque_c - tz * z)), abs(tz), self.params)
+        ep.grip_util = u
+        if u >= 1.0:
+            if k == ep.target and ep.target_detached:
+                ep.grip_lost = True
+            self._release()
+
+    def _update_neighbours(self) -> None:
+        ep = self._ep
+        moved = np.linalg.norm(self.data.xpos[self.body_ids] - self.init_xpos, axis=1)
+        for k in np.nonzero(moved > self.params.disturb_tolerance)[0]:
+            if int(k) != ep.target:
+                ep.disturbed.add(int(k))
+        ep.disturbed |= {k for k in ep.detached if k != ep.target}
+        lift = float(self.data.site_xpos[self.cap_top_sites[ep.target], 2] - self.init_cap_top[2])
+        ep.max_lift = max(ep.max_lift, lift)
+
+    # ------------------------------------------------------------------ outputs
+    def _lift(self) -> float:
+        return float(self.data.site_xpos[self.cap_top_sites[self._ep.target], 2] - self.init_cap_top[2])
+
+    def _success(self) -> bool:
+        ep = self._ep
+        return bool(ep.target_detached and ep.grip == ep.target and not ep.bruised
+                    and not ep.unstable and self._lift() >= self.params.lift_height)
+
+    def _reward(self, success: bool) -> float:
+        d, ep = self.data, self._ep
+        s = RewardState(
+            tool_pos=d.site_xpos[self.tool_site].copy(),
+            tool_axis=d.site_xmat[self.tool_site].reshape(3, 3)[:, 2].copy(),
+            est_cap_top=ep.estimate.cap_top, est_axis=ep.estimate.stem_axis,
+            gripped_target=ep.grip == ep.target, target_detached=ep.target_detached,
+            lift=self._lift(), lift_goal=self.params.lift_height, success=success,
+            bruised=bool(ep.bruised))
+        return compute_reward(s, self.reward_type)
+
+    def failure_cause(self) -> str | None:
+        """Why the episode is not (yet) a success, or None on success."""
+        ep = self._ep
+        if self._success():
+            return None
+        if ep.unstable:
+            return "unstable_simulation"
+        if not ep.reachable:
+            return "unreachable"
+        if ep.bruised:
+            return "bruised"
+        if ep.grip_lost:
+            return "grip_lost"
+        if not ep.ever_sealed_target:
+            return "neighbour_disturbed" if ep.disturbed else "no_seal"
+        if not ep.target_detached:
+            return "not_detached"
+        if ep.disturbed:
+            return "neighbour_disturbed"
+        return "timeout"
+
+    def _info(self, success: bool = False) -> dict[str, Any]:
+        ep = self._ep
+        return {
+            "is_success": bool(success),
+            "failure_cause": None if success else self.failure_cause(),
+            "target": ep.target,
+            "reachable": ep.reachable,
+            "gripped": ep.grip >= 0,
+            "gripped_target": ep.grip == ep.target,
+            "target_detached": ep.target_detached,
+            "bruised": sorted(ep.bruised),
+            "neighbours_disturbed": len(ep.disturbed),
+            "lift": self._lift(),
+            "unstable_simulation": ep.unstable,
+        }
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        d, ep = self.data, self._ep
+        pos = d.site_xpos[self.tool_site].copy()
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, d.site_xmat[self.tool_site])
+        est = ep.estimate
+        obs = {
+            "joint_pos": d.qpos[self.arm_qadr].copy(),
+            "joint_vel": d.qvel[self.arm_dadr].copy(),
+            "tool_pose": np.concatenate([pos, quat]),
+            "suction": np.array([float(ep.suction_on), float(ep.grip >= 0), ep.grip_util]),
+            "target_pose": np.concatenate([est.cap_top, est.stem_axis]),
+            "target_rel": est.cap_top - pos,
+        }
+        obs = {k: np.nan_to_num(v) for k, v in obs.items()}
+        if self.image_obs:
+            h, w = self.image_size
+            rgb = self._render(h, w, depth=False)
+            depth = self._render(h, w, depth=True)
+            obs["rgb"] = rgb
+            obs["depth"] = depth[..., None].astype(np.float32)
+        return obs
+
+    # ------------------------------------------------------------------ rendering
+    def _disown_renderers(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+        self._renderers = {}
+
+    def _render(self, h: int, w: int, depth: bool) -> np.ndarray:
+        os.environ.setdefault("MUJOCO_GL", "egl")
+        key = (h, w)
+        r = self._renderers.get(key)
+        if r is None:
+            r = mujoco.Renderer(self.model, h, w)
+            self._renderers[key] = r
+        if depth:
+            r.enable_depth_rendering()
+        else:
+            r.disable_depth_rendering()
+        r.update_scene(self.data, camera=self.camera)
+        out = r.render()
+        return out.copy()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None or self.data is None:
+            return None
+        h, w = self.render_size
+        return self._render(h, w, depth=self.render_mode == "depth_array")
+
+    def close(self) -> None:
+        self._disown_renderers()
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderers"] = {}
+        return state

@@ -1,0 +1,86 @@
+"""Pose sources: where the target mushroom's *estimated* pose in the observation comes from.
+
+A pose source is any callable ``(scene, instance_id, rng) -> PoseEstimate``. It is called once per
+episode at reset (a scan before the pick). ``"oracle"`` returns the truth; ``"noisy"`` rotates it
+by exactly ``pose_error_deg`` about a random axis perpendicular to the stem (and optionally adds
+Gaussian position noise); a perception pipeline plugs in as another callable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import mujoco
+import numpy as np
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """Estimated target pose: cap-top centre (m, world) and rotation (stem axis = column 2)."""
+
+    cap_top: np.ndarray
+    rotation: np.ndarray
+
+    @property
+    def stem_axis(self) -> np.ndarray:
+        return self.rotation[:, 2].copy()
+
+
+class PoseSource(Protocol):
+    def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate: ...
+
+
+def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
+    q = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(q, axis / np.linalg.norm(axis), angle)
+    r = np.zeros(9)
+    mujoco.mju_quat2Mat(r, q)
+    return r.reshape(3, 3)
+
+
+class OraclePose:
+    """The ground-truth pose from the scene."""
+
+    def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:
+        inst = scene.instances[instance_id]
+        return PoseEstimate(np.asarray(inst.cap_top, float).copy(), np.asarray(inst.rotation, float).copy())
+
+
+class NoisyPose:
+    """Truth rotated by exactly ``error_deg`` about a random axis perpendicular to the stem.
+
+    The cap-top centre is kept (it is what a camera sees best) unless ``position_std`` > 0 (m),
+    which adds isotropic Gaussian noise.
+    """
+
+    def __init__(self, error_deg: float, position_std: float = 0.0) -> None:
+        if not np.isfinite(error_deg) or not 0 <= error_deg <= 180:
+            raise ValueError(f"pose_error_deg must be in [0, 180], got {error_deg!r}")
+        if not np.isfinite(position_std) or position_std < 0:
+            raise ValueError(f"position_std must be >= 0, got {position_std!r}")
+        self.error = np.deg2rad(error_deg)
+        self.position_std = position_std
+
+    def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:
+        truth = OraclePose()(scene, instance_id, rng)
+        axis = truth.stem_axis
+        phi = rng.uniform(0, 2 * np.pi)
+        e1 = truth.rotation[:, 0]
+        e2 = truth.rotation[:, 1]
+        perp = np.cos(phi) * e1 + np.sin(phi) * e2
+        rot = _axis_angle(perp, self.error) @ truth.rotation if self.error > 0 else truth.rotation
+        centre = truth.cap_top + (rng.normal(0, self.position_std, 3) if self.position_std > 0 else 0)
+        return PoseEstimate(np.asarray(centre, float), rot)
+
+
+def make_pose_source(kind: str | PoseSource, pose_error_deg: float = 0.0,
+                     position_std: float = 0.0) -> PoseSource:
+    """``"oracle"``, ``"noisy"`` or any callable pose source (e.g. a perception pipeline)."""
+    if callable(kind):
+        return kind
+    if kind == "oracle":
+        return OraclePose()
+    if kind == "noisy":
+        return NoisyPose(pose_error_deg, position_std)
+    raise ValueError(f"pose_source must be 'oracle', 'noisy' or a callable, got {kind!r}")

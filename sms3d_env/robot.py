@@ -1,0 +1,150 @@
+"""Robot assembly: the Kinova Jaco arm (dm_control's bundled model) with a suction tool.
+
+The arm is loaded from the dm_control wheel (BSD-3, see ``assets/NOTICE.txt``), given gravity
+compensation and joint position actuators, fitted with a tool, and attached to a scene ``MjSpec``
+through a frame at the mount pose. Every name in the assembled model carries the ``jaco/`` prefix.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Literal
+
+import mujoco
+import numpy as np
+
+PREFIX = "jaco/"
+ARM_JOINTS: tuple[str, ...] = tuple(f"joint_{i}" for i in range(1, 7))
+TOOL_SITE = "cup_site"  # suction: the cup face, +z out of the cup; hand: the grip site
+CUP_BODY = "cup"
+CUP_GEOM = "cup_face"
+Tool = Literal["suction", "hand"]
+
+# Collision bitmasks shared by robot, soil and mushrooms (see physics.py for the mushroom side).
+ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 4
+# Tool geoms also carry bit 8, the only bit the soil accepts. KNOWN SIMPLIFICATION: the arm links
+# collide with nothing. From the low mount that the Jaco's joint limits need for tool-down reach,
+# the upper arm sweeps low over the bed's near edge; only the tool touches soil and mushrooms.
+TOOL_CONTYPE = ROBOT_CONTYPE | 8
+LINK_CONTYPE, LINK_CONAFFINITY = 0, 0
+# In-limits home posture (rad): the cup 20 cm above the patch centre, pointing down (solved once
+# by least squares for the default mount).
+HOME_Q = np.array([-0.205, 1.4551, 1.4696, -2.8701, -0.0164, -0.0577])
+
+
+def kinova_dir() -> str:
+    """Directory of dm_control's bundled Kinova Jaco assets."""
+    import dm_control
+
+    return os.path.join(os.path.dirname(dm_control.__file__), "third_party", "kinova")
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """Where and how the arm is mounted and driven.
+
+    Attributes:
+        mount_pos: arm base position in the world (m). The bed patch is centred on the origin with
+            the soil near z = 0; the base stands beside it so the whole patch is reachable with the
+            tool pointing down and tilted by up to 45 degrees (checked in tests/test_env_robot.py).
+        mount_yaw_deg: base rotation about world z.
+        tool: ``"suction"`` (default) or ``"hand"`` (the Jaco 3-finger hand, fingers unactuated).
+        cup_radius: suction cup radius (m), 10 mm as in harvest-physics.md (20 mm cup).
+        tube_length: length of the tube between the wrist flange and the cup (m). ASSUMPTION.
+        kp_large, kp_small: position gains of the shoulder/elbow and wrist actuators (N m/rad).
+            ASSUMPTION chosen for ~50 ms tracking with the model's armature.
+        force_large, force_small: actuator torque limits (N m). ASSUMPTION near Jaco's ratings.
+    """
+
+    mount_pos: tuple[float, float, float] = (-0.40, 0.0, -0.25)
+    mount_yaw_deg: float = 0.0
+    tool: Tool = "suction"
+    cup_radius: float = 0.010
+    tube_length: float = 0.09
+    kp_large: float = 1500.0
+    kp_small: float = 500.0
+    force_large: float = 40.0
+    force_small: float = 15.0
+    home_q: tuple[float, ...] = field(default=tuple(HOME_Q))
+
+    def __post_init__(self) -> None:
+        if self.tool not in ("suction", "hand"):
+            raise ValueError(f"RobotConfig.tool must be 'suction' or 'hand', got {self.tool!r}")
+        if not 0.003 <= self.cup_radius <= 0.05:
+            raise ValueError(f"RobotConfig.cup_radius must be in [3, 50] mm, got {self.cup_radius!r}")
+        if len(self.home_q) != 6:
+            raise ValueError("RobotConfig.home_q must have 6 entries")
+
+
+def _add_suction_tool(b6: mujoco.MjsBody, cfg: RobotConfig) -> None:
+    """A flange, a tube and a compliant cup along the hand's approach axis (hand frame -z)."""
+    tool = b6.add_body(name="tool", quat=[0.0, 0.70710678, 0.70710678, 0.0])
+    kw = dict(contype=TOOL_CONTYPE, conaffinity=ROBOT_CONAFFINITY)
+    tool.add_geom(name="flange", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.03, 0.008, 0],
+                  pos=[0, 0, -0.008], mass=0.08, rgba=[0.7, 0.7, 0.7, 1], **kw)
+    half = cfg.tube_length / 2
+    tool.add_geom(name="tube", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.006, half, 0],
+                  pos=[0, 0, -0.016 - half], mass=0.03, rgba=[0.8, 0.8, 0.8, 1], **kw)
+    z_cup = -0.016 - cfg.tube_length
+    cup = tool.add_body(name=CUP_BODY, pos=[0, 0, z_cup])
+    # Compliant cup: soft contact (solref time constant 20 ms, wide solimp) stands in for the bellows.
+    cup.add_geom(name=CUP_GEOM, type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                 size=[cfg.cup_radius, 0.004, 0], pos=[0, 0, -0.004], mass=0.01,
+                 rgba=[0.15, 0.35, 0.8, 1], solref=[0.02, 1.0], solimp=[0.9, 0.95, 0.005, 0.5, 2],
+                 friction=[1.0, 0.02, 0.001], condim=4, **kw)
+    # Site on the cup face; +z points out of the cup (along the approach direction).
+    cup.add_site(name=TOOL_SITE, pos=[0, 0, -0.008], quat=[0, 1, 0, 0], size=[0.004, 0, 0])
+
+
+def _add_hand_tool(b6: mujoco.MjsBody, spec: mujoco.MjSpec) -> None:
+    hand = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_hand.xml"))
+    frame = b6.add_frame()
+    frame.attach_body(hand.body("hand"), "hand_", "")
+    grip = spec.site("hand_gripsite")
+    palm = spec.body("hand_hand")
+    # The grip site re-created as the tool site (+z out of the palm), and a body for grip welds.
+    palm.add_site(name=TOOL_SITE, pos=list(grip.pos), quat=[0, 1, 0, 0], size=[0.004, 0, 0])
+    palm.add_body(name=CUP_BODY, pos=list(grip.pos))
+
+
+def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
+    """The Jaco arm with the chosen tool, gravity compensation and position actuators (no prefix)."""
+    spec = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_arm.xml"))
+    for name in ("b_1", "b_2", "b_3", "b_4", "b_5", "b_6"):
+        spec.body(name).gravcomp = 1.0
+    for g in spec.geoms:
+        g.contype, g.conaffinity = LINK_CONTYPE, LINK_CONAFFINITY
+    b6 = spec.body("b_6")
+    if cfg.tool == "suction":
+        _add_suction_tool(b6, cfg)
+    else:
+        _add_hand_tool(b6, spec)
+        for name in ("hand", "b_finger_1", "b_finger_2", "b_finger_3"):
+            spec.body("hand_" + name).gravcomp = 1.0
+    for i, jname in enumerate(ARM_JOINTS):
+        large = i < 3
+        act = spec.add_actuator(name=f"act_{jname}", target=jname,
+                                trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=cfg.kp_large if large else cfg.kp_small, dampratio=1.0)
+        f = cfg.force_large if large else cfg.force_small
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-f, f]
+    return spec
+
+
+def attach_robot(scene: mujoco.MjSpec, cfg: RobotConfig) -> mujoco.MjsFrame:
+    """Attach the arm to ``scene`` at the mount pose; names gain the ``jaco/`` prefix."""
+    arm = build_arm_spec(cfg)
+    yaw = np.deg2rad(cfg.mount_yaw_deg)
+    frame = scene.worldbody.add_frame(pos=list(cfg.mount_pos),
+                                      quat=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+    frame.attach_body(arm.body("b_base"), PREFIX, "")
+    return frame
+
+
+def arm_only_model(cfg: RobotConfig) -> mujoco.MjModel:
+    """The arm alone at its mount pose (used by the IK: 6 DoF instead of the scene's hundreds)."""
+    world = mujoco.MjSpec()
+    attach_robot(world, cfg)
+    return world.compile()

@@ -1,0 +1,121 @@
+"""Scripted pose-aware picker: the baseline policy, driven only by the observation.
+
+Phases: approach a stand-off point above the *estimated* cap top along the estimated stem axis
+with the cup facing down the axis; descend along the axis with suction on until the grip holds;
+bend about the estimated stem base (tilting further, into free space) while twisting about the
+estimated axis; lift straight up. A wrong estimate tilts the cup against the cap (no seal) or
+bends about the wrong point and direction.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+
+def _quat_to_mat(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+class ScriptedPicker:
+    """Approach, seal, bend and twist, lift. Call ``reset()`` at each episode start.
+
+    Args:
+        max_linear_speed, max_angular_speed: the env's action scales (m/s, rad/s).
+        standoff: approach point above the estimated cap top along the axis (m).
+        stem_height: assumed cap-top-to-stem-base distance for the bend pivot (m).
+        bend_rate, twist_rate: rad/s during the bend-and-twist phase of ``bend_steps`` steps.
+    """
+
+    def __init__(self, max_linear_speed: float = 0.12, max_angular_speed: float = 0.8,
+                 control_dt: float = 0.04, standoff: float = 0.04, stem_height: float = 0.04,
+                 descend_speed: float = 0.02, bend_rate: float = 0.5, twist_rate: float = 0.8,
+                 bend_steps: int = 12, lift_speed: float = 0.06) -> None:
+        self.vmax, self.wmax, self.dt = max_linear_speed, max_angular_speed, control_dt
+        self.standoff, self.stem_height = standoff, stem_height
+        self.descend_speed, self.bend_rate, self.twist_rate = descend_speed, bend_rate, twist_rate
+        self.bend_steps, self.lift_speed = bend_steps, lift_speed
+        self.reset()
+
+    @classmethod
+    def for_env(cls, env: gym.Env, **kwargs: Any) -> ScriptedPicker:
+        u = env.unwrapped
+        return cls(u.ctrl_cfg.max_linear_speed, u.ctrl_cfg.max_angular_speed, u.control_dt, **kwargs)
+
+    def reset(self) -> None:
+        self.phase = "approach"
+        self.count = 0
+        self.descended = 0.0
+
+    def _action(self, v: np.ndarray, w: np.ndarray, suction: bool) -> np.ndarray:
+        a = np.concatenate([v / self.vmax, w / self.wmax, [1.0 if suction else -1.0]])
+        return np.clip(a, -1, 1).astype(np.float32)
+
+    def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        p = obs["tool_pose"][:3]
+        z = _quat_to_mat(obs["tool_pose"][3:])[:, 2]
+        c, axis = obs["target_pose"][:3], obs["target_pose"][3:]
+        axis = axis / np.linalg.norm(axis)
+        w_align = 3.0 * np.cross(z, -axis)
+        gripped = obs["suction"][1] > 0.5
+        if self.phase == "approach":
+            goal = c + axis * self.standoff
+            err = goal - p
+            ang = np.degrees(np.arccos(np.clip(z @ -axis, -1, 1)))
+            if np.linalg.norm(err) < 0.003 and ang < 3.0:
+                self.phase = "descend"
+            v = 4.0 * err
+            n = np.linalg.norm(v)
+            v = v if n < self.vmax else v / n * self.vmax
+            return self._action(v, w_align, False)
+        if self.phase == "descend":
+            if gripped:
+                self.phase, self.count = "bend", 0
+            else:
+                self.descended += self.descend_speed * self.dt
+                if self.descended > self.standoff + 0.02:
+                    self.phase = "lift"
+            rel = p - c
+            lateral = rel - (rel @ axis) * axis
+            v = -axis * self.descend_speed - 4.0 * lateral
+            return self._action(v, w_align, True)
+        if self.phase == "bend":
+            self.count += 1
+            if self.count >= self.bend_steps:
+                self.phase = "lift"
+            horiz = np.array([axis[0], axis[1], 0.0])
+            if np.linalg.norm(horiz) < 0.05:
+                horiz = np.array([1.0, 0.0, 0.0])
+            bend_axis = np.cross(np.array([0.0, 0.0, 1.0]), horiz)
+            bend_axis /= np.linalg.norm(bend_axis)
+            w = self.bend_rate * bend_axis + self.twist_rate * axis
+            pivot = c - axis * self.stem_height
+            v = np.cross(w, p - pivot)
+            return self._action(v, w, True)
+        return self._action(np.array([0.0, 0.0, self.lift_speed]), np.zeros(3), True)
+
+
+def run_episode(env: gym.Env, policy: Any, seed: int, options: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Run one episode; ``policy(obs) -> action`` (``policy.reset()`` is called if present)."""
+    obs, info = env.reset(seed=seed, options=options)
+    if hasattr(policy, "reset"):
+        policy.reset()
+    total, steps = 0.0, 0
+    terminated = truncated = False
+    while not (terminated or truncated):
+        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        total += float(reward)
+        steps += 1
+    return {
+        "seed": seed, "success": bool(info["is_success"]), "failure_cause": info["failure_cause"],
+        "reachable": bool(info["reachable"]), "target": int(info["target"]), "steps": steps,
+        "return": total, "neighbours_disturbed": int(info["neighbours_disturbed"]),
+        "bruised": bool(info["bruised"]), "target_detached": bool(info["target_detached"]),
+    }

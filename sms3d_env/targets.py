@@ -1,0 +1,93 @@
+"""Target selection and reachability.
+
+Rules: ``"tallest"`` (highest cap top among reachable mushrooms, the default: the cup meets it
+before any neighbour), ``"largest"`` (cap diameter), ``"index"`` (``target_index``), ``"random"``.
+Reachability: inverse kinematics (bounded least squares on the arm-only model) reaches a
+pre-grasp pose above the cap top along the stem axis and the grasp pose itself.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+from scipy.optimize import least_squares
+
+from sms3d_env.robot import PREFIX, TOOL_SITE
+
+RULES = ("tallest", "largest", "index", "random")
+
+
+def tool_rotation_for_axis(axis: np.ndarray) -> np.ndarray:
+    """A tool rotation whose +z is ``-axis`` (cup facing the cap along the stem), roll fixed."""
+    z = -np.asarray(axis, float) / np.linalg.norm(axis)
+    ref = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(ref, z)
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
+class Reachability:
+    """IK feasibility on the arm-only model (a few ms per query)."""
+
+    def __init__(self, model: mujoco.MjModel, arm_qadr: np.ndarray, home: np.ndarray) -> None:
+        self.model, self.data = model, mujoco.MjData(model)
+        self.site = model.site(PREFIX + TOOL_SITE).id
+        self.qadr = arm_qadr
+        jids = [int(model.dof_jntid[i]) for i in range(model.nv)]
+        lo = np.full(len(arm_qadr), -2 * np.pi)
+        hi = np.full(len(arm_qadr), 2 * np.pi)
+        for k, a in enumerate(arm_qadr):
+            j = jids[a]
+            if model.jnt_limited[j]:
+                lo[k], hi[k] = model.jnt_range[j] + np.array([1e-3, -1e-3])
+        self.lo, self.hi, self.home = lo, hi, np.clip(home, lo + 1e-6, hi - 1e-6)
+
+    def _res(self, q: np.ndarray, pos: np.ndarray, z: np.ndarray) -> np.ndarray:
+        self.data.qpos[self.qadr] = q
+        mujoco.mj_kinematics(self.model, self.data)
+        r = self.data.site_xmat[self.site].reshape(3, 3)
+        return np.r_[(self.data.site_xpos[self.site] - pos) * 10, r[:, 2] - z]
+
+    def reachable(self, cap_top: np.ndarray, axis: np.ndarray, standoff: float = 0.05) -> bool:
+        z = -np.asarray(axis) / np.linalg.norm(axis)
+        q = self.home
+        for offset in (standoff, 0.0):
+            sol = least_squares(self._res, q, bounds=(self.lo, self.hi), max_nfev=100,
+                                args=(np.asarray(cap_top) - z * offset, z))
+            if sol.cost > 1e-6:
+                return False
+            q = np.clip(sol.x, self.lo + 1e-6, self.hi - 1e-6)
+        return True
+
+
+def select_target(scene: Any, rule: str, rng: np.random.Generator, reach: Reachability,
+                  index: int = 0, max_tilt_deg: float = 45.0) -> tuple[int, bool]:
+    """Returns (instance id, reachable)."""
+    if rule not in RULES:
+        raise ValueError(f"target rule must be one of {RULES}, got {rule!r}")
+    insts = scene.instances
+    n = len(insts)
+    if rule == "index":
+        if not 0 <= index < n:
+            raise ValueError(f"target index {index} out of range for {n} mushrooms")
+        i = int(index)
+        return i, _ok(insts[i], reach, max_tilt_deg)
+    if rule == "random":
+        order = list(rng.permutation(n))
+    elif rule == "tallest":
+        order = list(np.argsort([-inst.cap_top[2] for inst in insts], kind="stable"))
+    else:
+        order = list(np.argsort([-inst.cap_diameter for inst in insts], kind="stable"))
+    for i in order:
+        if _ok(insts[int(i)], reach, max_tilt_deg):
+            return int(i), True
+    return int(order[0]), False
+
+
+def _ok(inst: Any, reach: Reachability, max_tilt_deg: float) -> bool:
+    axis = np.asarray(inst.rotation)[:, 2]
+    if np.degrees(np.arccos(np.clip(axis[2], -1, 1))) > max_tilt_deg:
+        return False
+    return reach.reachable(np.asarray(inst.cap_top), axis)
