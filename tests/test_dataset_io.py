@@ -1,0 +1,186 @@
+"""Dataset files: COCO, determinism across workers/backends, kill-and-resume, errors, readers."""
+
+import errno
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pycocotools.coco import COCO
+
+from generator import ConfigError, SceneConfig
+from generator.dataset import (
+    CorruptFileError,
+    DatasetWriteError,
+    ManifestMismatchError,
+    generate_dataset,
+)
+from generator.dataset import writer as writer_module
+from generator.dataset.cli import main as cli_main
+from generator.dataset.readers import InstancePointCloudDataset, read_scene_files
+
+ROOT = Path(__file__).resolve().parents[1]
+CFG = SceneConfig().replace(camera__width=160, camera__height=120, placement__num_mushrooms=8)
+
+
+def tree_bytes(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref")
+    generate_dataset(out, CFG, 4, seed=11, progress=False)
+    return out
+
+
+def test_coco_loads_and_links_to_scene_json(reference):
+    n_anns = 0
+    for split in ("train", "val", "test"):
+        coco = COCO(str(reference / f"coco_{split}.json"))
+        assert {c["name"] for c in coco.loadCats(coco.getCatIds())} == {"mushroom", "mushroom_cap"}
+        for img in coco.loadImgs(coco.getImgIds()):
+            sample = read_scene_files(reference / img["file_name"].split("/")[0])
+            assert sample.index == img["scene_id"] == img["id"]
+            ids = {m["id"] for m in sample.record["instances"]}
+            for ann in coco.loadAnns(coco.getAnnIds(imgIds=img["id"])):
+                assert ann["scene_id"] == img["id"] and ann["instance_id"] in ids
+                labels = sample.labels_mushroom if ann["category_id"] == 1 else sample.labels_cap
+                assert np.array_equal(coco.annToMask(ann).astype(bool), labels == ann["instance_id"] + 1)
+                n_anns += 1
+    assert n_anns > 20
+
+
+def test_manifest_lists_complete_scenes_and_versions(reference):
+    import json
+
+    m = json.loads((reference / "manifest.json").read_text())
+    assert m["status"] == "complete" and [e["index"] for e in m["scenes"]] == [0, 1, 2, 3]
+    assert "mujoco" in m["packages"] and m["seed"] == 11
+    assert all((reference / e["dir"] / "DONE").is_file() for e in m["scenes"])
+
+
+def test_two_workers_give_identical_files(reference, tmp_path):
+    generate_dataset(tmp_path, CFG, 4, seed=11, workers=2, progress=False)
+    assert tree_bytes(tmp_path) == tree_bytes(reference)
+
+
+@pytest.mark.slow
+def test_ray_backend_gives_identical_files(reference, tmp_path):
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
+    try:
+        generate_dataset(tmp_path, CFG, 4, seed=11, backend="ray", progress=False)
+    finally:
+        ray.shutdown()
+    assert tree_bytes(tmp_path) == tree_bytes(reference)
+
+
+def test_killed_and_resumed_run_equals_uninterrupted(reference, tmp_path):
+    cmd = [sys.executable, "-m", "generator.dataset.cli", "generate", "--out", str(tmp_path), "--num-scenes", "4",
+           "--seed", "11", "--num-mushrooms", "8", "--width", "160", "--height", "120", "--no-progress"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not (tmp_path / "scene_000000" / "DONE").exists():
+        assert proc.poll() is None and time.monotonic() < deadline, "generator ended before the first scene"
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (tmp_path / "scene_000003").exists(), "the run finished before it was killed"
+    assert not (tmp_path / "coco_train.json").exists()
+    assert subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True).returncode == 0
+    assert tree_bytes(tmp_path) == tree_bytes(reference)
+
+
+def test_disk_full_leaves_nothing_marked_complete_and_resume_recovers(reference, tmp_path, monkeypatch):
+    real_write = writer_module._write_bytes
+
+    def failing(path, data):
+        if "scene_000001.tmp" in str(path) and path.name == "depth.png":
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+        real_write(path, data)
+
+    monkeypatch.setattr(writer_module, "_write_bytes", failing)
+    with pytest.raises(DatasetWriteError, match="disk full") as info:
+        generate_dataset(tmp_path, CFG, 4, seed=11, progress=False)
+    assert "scene_000001" in str(info.value)
+    assert (tmp_path / "scene_000000" / "DONE").is_file()
+    assert not (tmp_path / "scene_000001").exists() and not list(tmp_path.glob("*.tmp"))
+    import json
+
+    m = json.loads((tmp_path / "manifest.json").read_text())
+    assert m["status"] == "incomplete" and [e["index"] for e in m["scenes"]] == [0]
+    monkeypatch.setattr(writer_module, "_write_bytes", real_write)
+    generate_dataset(tmp_path, CFG, 4, seed=11, progress=False)
+    assert tree_bytes(tmp_path) == tree_bytes(reference)
+
+
+def test_unwritable_output_folder_is_a_clear_error(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    with pytest.raises(DatasetWriteError, match="not writable") as info:
+        generate_dataset(blocker / "out", CFG, 1, progress=False)
+    assert info.value.path == blocker / "out"
+    assert cli_main(["generate", "--out", str(blocker / "out"), "--num-scenes", "1", "--no-progress"]) == 2
+
+
+def test_invalid_config_is_rejected_before_writing(tmp_path, capsys):
+    assert cli_main(["generate", "--out", str(tmp_path / "o"), "--num-scenes", "1", "--num-mushrooms", "0"]) == 2
+    assert "placement.num_mushrooms" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("camera: {width: 5}\n")
+    with pytest.raises(ConfigError, match="camera.width"):
+        SceneConfig.from_file(str(bad))
+
+
+def test_resume_with_other_settings_is_refused(reference, tmp_path):
+    generate_dataset(tmp_path, CFG, 1, seed=1, progress=False)
+    with pytest.raises(ManifestMismatchError, match="seed"):
+        generate_dataset(tmp_path, CFG, 1, seed=2, progress=False)
+
+
+def test_corrupt_files_are_named(reference, tmp_path):
+    import shutil
+
+    shutil.copytree(reference / "scene_000002", tmp_path / "scene_000002")
+    rgb = tmp_path / "scene_000002" / "rgb.png"
+    rgb.write_bytes(rgb.read_bytes()[:200])
+    with pytest.raises(CorruptFileError) as info:
+        read_scene_files(tmp_path / "scene_000002")
+    assert info.value.path == rgb
+    with pytest.raises(CorruptFileError, match="not a readable PNG"):
+        read_scene_files(tmp_path / "scene_000002", verify=False)
+    scene_json = tmp_path / "scene_000002" / "scene.json"
+    scene_json.write_text("{not json")
+    with pytest.raises(CorruptFileError, match="scene.json"):
+        read_scene_files(tmp_path / "scene_000002", verify=False)
+
+
+def test_point_cloud_dataset_in_camera_frame(reference):
+    ds = InstancePointCloudDataset(reference, num_points=128, cap_only=True)
+    assert len(ds) > 10
+    item = ds[0]
+    assert item["points"].shape == (128, 3)
+    r = item["rotation"].double().numpy()
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-6)
+    np.testing.assert_allclose(r[:, 2], item["stem_axis"].double().numpy(), atol=1e-6)
+    # the visible cap points lie within a cap diameter of the cap centre
+    d = np.linalg.norm(item["points"].double().numpy() - item["cap_center"].double().numpy(), axis=1)
+    assert d.max() < item["meta"]["cap_diameter"]
+    assert np.array_equal(ds[0]["points"].numpy(), item["points"].numpy())  # repeatable sampling
+
+
+def test_show_writes_an_overlay(reference, tmp_path):
+    import cv2
+
+    out = tmp_path / "show.png"
+    assert cli_main(["show", str(reference), "--scene", "1", "--out", str(out)]) == 0
+    img = cv2.imread(str(out))
+    rgb = cv2.imread(str(reference / "scene_000001" / "rgb.png"))
+    assert img.shape == rgb.shape and (np.abs(img.astype(int) - rgb).sum(axis=2) > 30).mean() > 0.02
