@@ -15,7 +15,9 @@ import numpy as np
 # Collision bitmasks: soil 1, robot 2, mushroom 4, tool 8 (robot.py holds the robot's).
 SOIL_CONTYPE, SOIL_CONAFFINITY = 1, 8  # the tool only; detached mushrooms via their conaffinity
 ROOTED_CONTYPE, ROOTED_CONAFFINITY = 4, 2  # touch the robot only
-FREE_CONTYPE, FREE_CONAFFINITY = 4, 1 | 2 | 4  # detached: soil, robot, other mushrooms
+FREE_CONTYPE, FREE_CONAFFINITY = 4, 2 | 4  # detached: robot, other mushrooms ...
+LIFTED_CONAFFINITY = 1 | 2 | 4  # ... and the soil once clear of it (its stem base starts sunk in)
+SOIL_CLEARANCE = 0.005  # m a detached mushroom must rise before it collides with the soil
 
 
 @dataclass(frozen=True)
@@ -84,14 +86,14 @@ def root_utilisation(tension: np.ndarray, bend: np.ndarray, twist: np.ndarray,
 
 def grip_utilisation(tension: float, shear: float, bend: float, twist: float,
                      p: PickPhysicsParams) -> float:
-    """Load on the seal as a fraction of its capacity (>= 1 releases).
+    """Load on the seal as a fraction of its capacity (>= 1 releases), elliptic interaction.
 
     Capacities: tension = holding force; shear = friction x holding force; bending moment =
     holding force x a / 2 (one rim edge lifts); twist = friction x holding force x 2a/3.
     """
     fh, a, mu = p.holding_force, p.cup_radius, p.shear_friction
-    return (tension / fh + shear / (mu * fh) + bend / (fh * a / 2)
-            + twist / (mu * fh * 2 * a / 3))
+    return math.sqrt((tension / fh) ** 2 + (shear / (mu * fh)) ** 2 + (bend / (fh * a / 2)) ** 2
+                     + (twist / (mu * fh * 2 * a / 3)) ** 2)
 
 
 def wrench_from_rows(model: mujoco.MjModel, data: mujoco.MjData, rows: np.ndarray,

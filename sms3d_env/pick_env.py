@@ -206,6 +206,7 @@ class SMS3DPickEnv(gym.Env):
         self.robot_geom = np.zeros(m.ngeom, bool)
         self.robot_geom[[g for g in range(m.ngeom) if m.geom(g).name.startswith(PREFIX)]] = True
         self.cup_geom = m.geom(PREFIX + CUP_GEOM).id
+        self._cup_mask = (int(m.geom_contype[self.cup_geom]), int(m.geom_conaffinity[self.cup_geom]))
         self.cup_body = m.body(PREFIX + CUP_BODY).id
         self.tool_site = m.site(PREFIX + TOOL_SITE).id
         self.arm_qadr = np.array([m.jnt_qposadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS])
@@ -337,12 +338,18 @@ class SMS3DPickEnv(gym.Env):
         m.eq_data[e, 3:10] = ph.weld_relpose(m, d, self.cup_body, self.body_ids[k])
         m.eq_data[e, 10] = 1.0
         d.eq_active[e] = 1
+        # While sealed, the weld is the cup-cap interface: the cup face stops colliding with
+        # mushrooms (otherwise contact and weld fight and load the seal with internal forces).
+        m.geom_conaffinity[self.cup_geom] = 0
+        m.geom_contype[self.cup_geom] = ph.SOIL_CONAFFINITY
         ep.grip = k
         if k == ep.target:
             ep.ever_sealed_target = True
 
     def _release(self) -> None:
         self.data.eq_active[self.grip_eq[self._ep.grip]] = 0
+        self.model.geom_contype[self.cup_geom] = self._cup_mask[0]
+        self.model.geom_conaffinity[self.cup_geom] = self._cup_mask[1]
         self._ep.grip = -1
         self._ep.grip_util = 0.0
 
@@ -401,6 +408,14 @@ class SMS3DPickEnv(gym.Env):
             if int(k) != ep.target:
                 ep.disturbed.add(int(k))
         ep.disturbed |= {k for k in ep.detached if k != ep.target}
+        m = self.model
+        for k in ep.detached:
+            b = self.body_ids[k]
+            if (m.body_conaffinity[b] != ph.LIFTED_CONAFFINITY
+                    and self.data.xpos[b, 2] - self.init_xpos[k, 2] > ph.SOIL_CLEARANCE):
+                for g in (self.cap_geoms[k], self.stem_geoms[k]):
+                    m.geom_conaffinity[g] = ph.LIFTED_CONAFFINITY
+                m.body_conaffinity[b] = ph.LIFTED_CONAFFINITY
         lift = float(self.data.site_xpos[self.cap_top_sites[ep.target], 2] - self.init_cap_top[2])
         ep.max_lift = max(ep.max_lift, lift)
 

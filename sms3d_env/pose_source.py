@@ -64,7 +64,6 @@ class NoisyPose:
 
     def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:
         truth = OraclePose()(scene, instance_id, rng)
-        axis = truth.stem_axis
         phi = rng.uniform(0, 2 * np.pi)
         e1 = truth.rotation[:, 0]
         e2 = truth.rotation[:, 1]

@@ -36,7 +36,7 @@ class ScriptedPicker:
 
     def __init__(self, max_linear_speed: float = 0.12, max_angular_speed: float = 0.8,
                  control_dt: float = 0.04, standoff: float = 0.04, stem_height: float = 0.04,
-                 descend_speed: float = 0.02, bend_rate: float = 0.5, twist_rate: float = 0.8,
+                 descend_speed: float = 0.02, bend_rate: float = 0.05, twist_rate: float = 1.0,
                  bend_steps: int = 12, lift_speed: float = 0.06) -> None:
         self.vmax, self.wmax, self.dt = max_linear_speed, max_angular_speed, control_dt
         self.standoff, self.stem_height = standoff, stem_height
