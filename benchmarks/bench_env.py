@@ -13,7 +13,6 @@ import time
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
 
 import generator  # noqa: E402
 import sms3d_env  # noqa: E402, F401
