@@ -10,8 +10,14 @@ from collections.abc import Sequence
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-# Modules that add their own subcommands with ``register(subparsers)``.
-SUBCOMMAND_MODULES = ()
+# Modules that add their own subcommands with ``register(subparsers)``; named here rather than
+# imported so that ``generator`` itself never imports the perception or environment packages.
+SUBCOMMAND_MODULES = (
+    "generator.dataset.cli",
+    "perception.cli_pose",
+    "sms3d_env.accuracy_study",
+    "sms3d_env.demo",
+)
 
 
 def _scene_config(args: argparse.Namespace):

@@ -1,0 +1,75 @@
+import csv
+import json
+
+import pytest
+
+from sms3d_env.accuracy_study import (
+    SweepConfig,
+    plan_tasks,
+    run_sweep,
+    success_table,
+    tolerable_error,
+    wilson_interval,
+    write_report,
+)
+
+
+def test_wilson_interval_known_values():
+    lo, hi = wilson_interval(8, 10)
+    assert lo == pytest.approx(0.4902, abs=1e-3) and hi == pytest.approx(0.9433, abs=1e-3)
+    assert wilson_interval(0, 20)[0] == 0.0
+    assert wilson_interval(20, 20)[1] == pytest.approx(1.0)
+
+
+def _rows(successes_by_error, n=20):
+    rows = []
+    for error, wins in successes_by_error.items():
+        for k in range(n):
+            rows.append({"variant": "default", "error_deg": error, "reachable": True, "success": k < wins,
+                         "failure_cause": None if k < wins else "no_seal", "tilt_deg": 10.0 * (k % 5),
+                         "nn_distance": 0.01 * (k + 1), "seed": k})
+    return rows
+
+
+def test_tolerable_error_is_the_last_error_within_five_points():
+    table = success_table(_rows({0.0: 20, 5.0: 19, 10.0: 17, 20.0: 19, 30.0: 5}))
+    # 10 deg drops 15 points: the answer stops at 5 deg even though 20 deg recovers.
+    assert tolerable_error(table) == 5.0
+    assert tolerable_error(success_table(_rows({5.0: 20}))) is None
+    causes = {t["error_deg"]: t["causes"] for t in table}
+    assert causes[30.0] == {"no_seal": 15}
+
+
+def test_config_validation():
+    with pytest.raises(ValueError, match="errors_deg"):
+        SweepConfig(errors_deg=(float("nan"),))
+    with pytest.raises(ValueError, match="variants"):
+        SweepConfig(variants=("bogus",))
+    tasks = plan_tasks(SweepConfig(errors_deg=(0, 5), episodes=5, chunk=2))
+    assert len(tasks) == 6 and tasks[0].episode_seeds == (0, 1) and tasks[2].episode_seeds == (4,)
+
+
+def test_small_sweep_resumes_and_reports(tmp_path):
+    config = SweepConfig(errors_deg=(0.0, 30.0), episodes=2, chunk=1, num_mushrooms=8)
+    rows = run_sweep(config, tmp_path, progress=False)
+    assert len(rows) == 4
+    assert {r["error_deg"] for r in rows} == {0.0, 30.0}
+    # Paired design: the same seeds pick the same scenes and targets at every error.
+    by_seed = {}
+    for r in rows:
+        by_seed.setdefault(r["seed"], set()).add(r["target"])
+    assert all(len(t) == 1 for t in by_seed.values())
+    parts = sorted((tmp_path / "parts").glob("*.json"))
+    assert len(parts) == 4
+    # A lost part is redone, the others are read back, and the numbers are the same.
+    removed = parts[1]
+    before = removed.read_text()
+    removed.unlink()
+    again = run_sweep(config, tmp_path, progress=False)
+    assert removed.read_text() == before
+    assert json.dumps(again, sort_keys=True) == json.dumps(rows, sort_keys=True)
+    paths = write_report(rows, tmp_path, "sms3d sweep ...")
+    with open(paths["csv"]) as fh:
+        assert len(list(csv.DictReader(fh))) == 4
+    assert paths["png"].stat().st_size > 10_000
+    assert "tolerable error" in paths["md"].read_text()
