@@ -34,13 +34,13 @@ def scene_annotations(labels_mushroom: np.ndarray, labels_cap: np.ndarray,
                       amodal_caps: dict[int, np.ndarray], instances: list[Any]) -> list[dict[str, Any]]:
     """Per-scene annotations without image or annotation ids (added when merging)."""
     anns: list[dict[str, Any]] = []
+    present = {1: set(np.unique(labels_mushroom).tolist()), 2: set(np.unique(labels_cap).tolist())}
     for inst in instances:
         label = inst.id + 1
         for category, labels in ((1, labels_mushroom), (2, labels_cap)):
-            mask = labels == label
-            if not mask.any():
+            if label not in present[category]:
                 continue
-            rle = encode_mask(mask)
+            rle = encode_mask(labels == label)
             area, bbox = rle_area_bbox(rle)
             ann: dict[str, Any] = {"category_id": category, "instance_id": inst.id, "species": inst.species,
                                    "segmentation": rle, "area": area, "bbox": bbox, "iscrowd": 0}

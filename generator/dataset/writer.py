@@ -41,8 +41,6 @@ def dumps(obj: Any) -> str:
 def _write_bytes(path: Path, data: bytes) -> None:
     with open(path, "wb") as fh:
         fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
 
 
 def encode_png(image: np.ndarray) -> bytes:
