@@ -168,8 +168,13 @@ class SMS3DPickEnv(gym.Env):
         from generator.mjcf import scene_to_spec
 
         spec = scene_to_spec(scene)
-        attach_robot(spec, self.robot_cfg)
         n = len(scene.instances)
+        for inst in scene.instances:
+            # The root weld's anchor is given in body2's frame, and body2 is the world: put it at
+            # the stem base. (At the world origin, as generated, the weld is a pendulum about the
+            # origin: a rooted mushroom 10 cm away swings by centimetres under small loads.)
+            spec.equality(f"mushroom_{inst.id}_root").data[:3] = np.asarray(inst.position, float)
+        attach_robot(spec, self.robot_cfg)
         for i in range(n):
             spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
                               objtype=mujoco.mjtObj.mjOBJ_BODY, name1=PREFIX + CUP_BODY,
@@ -309,7 +314,7 @@ class SMS3DPickEnv(gym.Env):
                             and ep.grip < 0 and fn >= p.seal_force):
                         normal = d.contact.frame[c][:3] * (1.0 if g1 == self.cup_geom else -1.0)
                         if self._seals(int(k), d.contact.pos[c], normal):
-                            self._grip(int(k))
+                            self._grip(int(k), d.contact.pos[c].copy())
         if ep.grip >= 0:
             touched.add(ep.grip)
         rooted = [k for k in touched if d.eq_active[self.root_eq[k]]]
@@ -331,11 +336,21 @@ class SMS3DPickEnv(gym.Env):
         radial = np.linalg.norm(rel - (rel @ axis) * axis)
         return bool(radial <= p.seal_region * self.cap_radius[k])
 
-    def _grip(self, k: int) -> None:
+    def _grip(self, k: int, point: np.ndarray | None = None) -> None:
+        """Seal the cup on mushroom ``k``: a weld anchored at the contact ``point`` (world)."""
         m, d, ep = self.model, self.data, self._ep
         e = self.grip_eq[k]
-        m.eq_data[e, :3] = 0.0
-        m.eq_data[e, 3:10] = ph.weld_relpose(m, d, self.cup_body, self.body_ids[k])
+        b = self.body_ids[k]
+        if point is None:
+            point = d.site_xpos[self.tool_site]
+        # Anchor (body2 = mushroom frame) at the cup-cap contact: the weld is the seal itself.
+        # MuJoCo's weld joins the point eq_data[:3] in body2's frame to the point eq_data[3:6] in
+        # body1's (the cup's) frame: both are the contact point now; eq_data[6:10] is the
+        # relative orientation.
+        point = np.asarray(point, float)
+        m.eq_data[e, :3] = d.xmat[b].reshape(3, 3).T @ (point - d.xpos[b])
+        m.eq_data[e, 3:10] = ph.weld_relpose(m, d, self.cup_body, b)
+        m.eq_data[e, 3:6] = d.xmat[self.cup_body].reshape(3, 3).T @ (point - d.xpos[self.cup_body])
         m.eq_data[e, 10] = 1.0
         d.eq_active[e] = 1
         # While sealed, the weld is the cup-cap interface: the cup face stops colliding with
@@ -380,17 +395,22 @@ class SMS3DPickEnv(gym.Env):
                 if k == ep.target:
                     ep.target_detached = True
 
-    def _check_grip(self) -> None:
-        d, ep = self.data, self._ep
-        k = ep.grip
+    def grip_wrench(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Load the seal carries: world force the cup exerts on the gripped mushroom, its moment
+        about the cup contact point (the tool site on the cup face), and the cup axis."""
+        d, k = self.data, self._ep.grip
         nefc = d.nefc
         rows = (d.efc_type[:nefc] == _EQ) & (d.efc_id[:nefc] == self.grip_eq[k])  # eq ids only
         q = self._eq_wrench(rows)
         b = self.body_ids[k]
         force, torque = ph.free_body_wrench(q, self.dofadr[k], d.xmat[b].reshape(3, 3))
-        pc = d.site_xpos[self.tool_site]
-        torque_c = torque + np.cross(d.xpos[b] - pc, force)
-        z = d.site_xmat[self.tool_site].reshape(3, 3)[:, 2]
+        moment = ph.moment_about(force, torque, d.xpos[b], d.site_xpos[self.tool_site])
+        return force, moment, d.site_xmat[self.tool_site].reshape(3, 3)[:, 2].copy()
+
+    def _check_grip(self) -> None:
+        ep = self._ep
+        k = ep.grip
+        force, torque_c, z = self.grip_wrench()
         fz = float(force @ z)
         tz = float(torque_c @ z)
         u = ph.grip_utilisation(max(0.0, -fz), float(np.linalg.norm(force - fz * z)),

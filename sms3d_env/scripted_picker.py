@@ -1,10 +1,10 @@
 """Scripted pose-aware picker: the baseline policy, driven only by the observation.
 
 Phases: approach a stand-off point above the *estimated* cap top along the estimated stem axis
-with the cup facing down the axis; descend along the axis with suction on until the grip holds;
-bend about the estimated stem base (tilting further, into free space) while twisting about the
-estimated axis; lift straight up. A wrong estimate tilts the cup against the cap (no seal) or
-bends about the wrong point and direction.
+with the cup facing down the axis; descend along the axis with suction on until the cup seals;
+twist about the estimated stem axis ("twist, do not pull", optionally with a gentle bend); lift
+straight up. A wrong estimate tilts the cup against the cap (no seal, or a contact off the cap
+top) and twists about the wrong axis, which bends the root and the seal.
 """
 
 from __future__ import annotations
@@ -25,23 +25,39 @@ def _quat_to_mat(q: np.ndarray) -> np.ndarray:
 
 
 class ScriptedPicker:
-    """Approach, seal, bend and twist, lift. Call ``reset()`` at each episode start.
+    """Approach, seal, twist (with a gentle bend), lift. Call ``reset()`` at each episode start.
+
+    Phases, all along the *estimated* pose from the observation:
+
+    1. ``approach``: move to a stand-off point above the estimated cap top on the estimated stem
+       axis, the cup facing down that axis;
+    2. ``descend``: move down the axis with suction on until the cup seals (or give up);
+    3. ``twist``: rotate about the estimated stem axis through the cup ("twist, do not pull"),
+       with a slight pull along the axis and an optional gentle bend about the estimated stem
+       base; a wrong axis turns part of the twist into bending of the root and the seal;
+    4. ``lift``: straight up.
 
     Args:
         max_linear_speed, max_angular_speed: the env's action scales (m/s, rad/s).
         standoff: approach point above the estimated cap top along the axis (m).
         stem_height: assumed cap-top-to-stem-base distance for the bend pivot (m).
-        bend_rate, twist_rate: rad/s during the bend-and-twist phase of ``bend_steps`` steps.
+        descend_speed: approach speed along the axis once at the stand-off point (m/s).
+        twist_rate: rad/s about the estimated axis during ``twist_steps`` control steps.
+        bend_rate: rad/s of gentle bend (about a horizontal axis, pivot at the estimated stem base).
+        pull_speed: slight withdrawal along the axis while twisting (m/s).
+        settle_steps: still steps after the seal forms (the arm stops pressing).
     """
 
     def __init__(self, max_linear_speed: float = 0.12, max_angular_speed: float = 0.8,
-                 control_dt: float = 0.04, standoff: float = 0.04, stem_height: float = 0.04,
-                 descend_speed: float = 0.02, bend_rate: float = 0.05, twist_rate: float = 1.0,
-                 bend_steps: int = 12, lift_speed: float = 0.06) -> None:
+                 control_dt: float = 0.04, standoff: float = 0.03, stem_height: float = 0.04,
+                 descend_speed: float = 0.02, twist_rate: float = 0.8, bend_rate: float = 0.0,
+                 twist_steps: int = 30, pull_speed: float = 0.002, settle_steps: int = 2,
+                 lift_speed: float = 0.06) -> None:
         self.vmax, self.wmax, self.dt = max_linear_speed, max_angular_speed, control_dt
         self.standoff, self.stem_height = standoff, stem_height
         self.descend_speed, self.bend_rate, self.twist_rate = descend_speed, bend_rate, twist_rate
-        self.bend_steps, self.lift_speed = bend_steps, lift_speed
+        self.twist_steps, self.pull_speed, self.settle_steps = twist_steps, pull_speed, settle_steps
+        self.lift_speed = lift_speed
         self.reset()
 
     @classmethod
@@ -77,27 +93,35 @@ class ScriptedPicker:
             return self._action(v, w_align, False)
         if self.phase == "descend":
             if gripped:
-                self.phase, self.count = "bend", 0
-            else:
-                self.descended += self.descend_speed * self.dt
-                if self.descended > self.standoff + 0.02:
-                    self.phase = "lift"
+                self.phase, self.count = "settle", 0
+                return self._action(np.zeros(3), np.zeros(3), True)
+            self.descended += self.descend_speed * self.dt
+            if self.descended > self.standoff + 0.02:
+                self.phase = "lift"
             rel = p - c
             lateral = rel - (rel @ axis) * axis
             v = -axis * self.descend_speed - 4.0 * lateral
             return self._action(v, w_align, True)
-        if self.phase == "bend":
+        if self.phase == "settle":
             self.count += 1
-            if self.count >= self.bend_steps:
+            if self.count >= self.settle_steps:
+                self.phase, self.count = "twist", 0
+            return self._action(np.zeros(3), np.zeros(3), True)
+        if self.phase == "twist":
+            self.count += 1
+            if self.count >= self.twist_steps:
                 self.phase = "lift"
-            horiz = np.array([axis[0], axis[1], 0.0])
-            if np.linalg.norm(horiz) < 0.05:
-                horiz = np.array([1.0, 0.0, 0.0])
-            bend_axis = np.cross(np.array([0.0, 0.0, 1.0]), horiz)
-            bend_axis /= np.linalg.norm(bend_axis)
-            w = self.bend_rate * bend_axis + self.twist_rate * axis
-            pivot = c - axis * self.stem_height
-            v = np.cross(w, p - pivot)
+            w = self.twist_rate * axis
+            v = self.pull_speed * axis
+            if self.bend_rate > 0:
+                horiz = np.array([axis[0], axis[1], 0.0])
+                if np.linalg.norm(horiz) < 0.05:
+                    horiz = np.array([1.0, 0.0, 0.0])
+                bend_axis = np.cross(np.array([0.0, 0.0, 1.0]), horiz)
+                bend_axis /= np.linalg.norm(bend_axis)
+                wb = self.bend_rate * bend_axis
+                w = w + wb
+                v = v + np.cross(wb, p - (c - axis * self.stem_height))
             return self._action(v, w, True)
         return self._action(np.array([0.0, 0.0, self.lift_speed]), np.zeros(3), True)
 
