@@ -1,0 +1,111 @@
+"""Inference wrapper: one camera-frame point cloud → rotation, stem axis and centre.
+
+``PoseEstimator.estimate`` raises :class:`~perception.errors.NoEstimate` when fewer than
+``min_points`` finite points remain (empty masks, NaN depth); ``estimate_or_none`` returns
+``None`` instead. It never returns NaN.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from perception.pointcloud import MIN_POINTS, SamplingMethod, prepare_cloud, to_tensor
+from perception.pose_net import PoseNet, load_checkpoint
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+DEFAULT_WEIGHTS = "posenet_default.pt"
+
+
+def default_weights_path() -> Path:
+    """Path of the shipped default weights (package data)."""
+    return WEIGHTS_DIR / DEFAULT_WEIGHTS
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A mushroom pose in the camera frame (OpenCV axes, metres)."""
+
+    rotation: np.ndarray  # (3, 3) camera-from-mushroom
+    stem_axis: np.ndarray  # (3,) unit, = rotation[:, 2], from stem base towards the cap
+    centre: np.ndarray  # (3,) centroid of the valid observed points
+    num_points: int  # valid points the estimate is based on
+
+
+class PoseEstimator:
+    """Wraps a trained :class:`PoseNet` for single or batched inference."""
+
+    def __init__(
+        self,
+        model: PoseNet,
+        device: str | torch.device = "cpu",
+        sampling: SamplingMethod = "random",
+        seed: int = 0,
+        min_points: int = MIN_POINTS,
+    ) -> None:
+        self.model = model.to(device).eval()
+        self.config = model.config
+        self.device = torch.device(device)
+        self.sampling = sampling
+        self.min_points = min_points
+        self._rng = np.random.default_rng(seed)
+
+    @classmethod
+    def from_checkpoint(cls, path: str | Path, device: str = "cpu", **kwargs) -> PoseEstimator:
+        model, _ = load_checkpoint(path, map_location=device)
+        return cls(model, device, **kwargs)
+
+    @classmethod
+    def from_pretrained(cls, device: str = "cpu", **kwargs) -> PoseEstimator:
+        """The shipped default network (``perception/weights/posenet_default.pt``)."""
+        return cls.from_checkpoint(default_weights_path(), device, **kwargs)
+
+    def estimate(self, points_cam: np.ndarray, colors: np.ndarray | None = None) -> Estimate:
+        """Estimate one mushroom's pose from its ``(N, 3)`` camera-frame points.
+
+        Raises:
+            NoEstimate: fewer than ``min_points`` finite points.
+            ValueError: wrong shapes, or colours missing for an RGB network.
+        """
+        return self.estimate_batch([points_cam], None if colors is None else [colors])[0]
+
+    def estimate_or_none(self, points_cam: np.ndarray, colors: np.ndarray | None = None) -> Estimate | None:
+        """Like :meth:`estimate`, but ``None`` instead of raising :class:`NoEstimate`."""
+        from perception.errors import NoEstimate
+
+        try:
+            return self.estimate(points_cam, colors)
+        except NoEstimate:
+            return None
+
+    @torch.no_grad()
+    def estimate_batch(
+        self, clouds: Sequence[np.ndarray], colors: Sequence[np.ndarray | None] | None = None
+    ) -> list[Estimate]:
+        """Estimate several mushrooms in one forward pass (raises :class:`NoEstimate` if any
+        cloud is too small; filter with :meth:`estimate_or_none` per cloud if that can happen)."""
+        if self.config.use_rgb and colors is None:
+            raise ValueError("colors: this network uses RGB; pass colours for every cloud")
+        prepared = [
+            prepare_cloud(
+                np.asarray(p, dtype=np.float32),
+                self.config.num_points,
+                self._rng,
+                None if not self.config.use_rgb else np.asarray(colors[i], dtype=np.float32),
+                self.sampling,
+                self.min_points,
+            )
+            for i, p in enumerate(clouds)
+        ]
+        if not prepared:
+            return []
+        x = torch.stack([to_tensor(c.points, c.colors) for c in prepared]).to(self.device)
+        R = self.model(x).double().cpu().numpy()
+        return [
+            Estimate(R[i], R[i][:, 2].copy(), np.asarray(c.centre, dtype=np.float64), c.num_valid)
+            for i, c in enumerate(prepared)
+        ]
