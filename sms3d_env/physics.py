@@ -33,8 +33,12 @@ class PickPhysicsParams:
         pull_force: axial tension at the root that detaches a mushroom (N). ASSUMPTION (no source
             for pull-off force): above the suction holding force, so a straight pull loses the
             grip first, as "twist, do not pull" and every documented method imply.
-        bend_moment: bending moment at the root that detaches (N m). ASSUMPTION (no source);
-            about 2 N of side force at a 1 cm lever, well above what gravity gives a tilted cap.
+        bend_moment: bending moment at the root that detaches (N m). ASSUMPTION (no source):
+            about 2 N of side force on a cap 4 cm above the root, 8x what gravity gives a 50 g
+            mushroom tilted by 30 degrees. It exceeds the seal's bending capacity (holding force
+            x a / 2 = 0.031 N m), so bending alone loses the grip before it detaches, as the
+            twist-first methods in harvest-physics.md imply. (0.02 N m, the earlier value, is
+            0.5 N at the cap: a cup's approach alone uprooted mushrooms.)
         twist_torque: torque about the stem that detaches (N m). ASSUMPTION (no source); twisting
             detaches most easily, as pickers are told ("twist, do not pull").
         vacuum: suction vacuum (Pa), 20 kPa as in harvest-physics.md.
