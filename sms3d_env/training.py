@@ -1,0 +1,390 @@
+"""Pick policies trained with stable-baselines3 (PPO or SAC) on ``SMS3DPick-v0``.
+
+``train_policy(TrainConfig(...))`` trains with vectorised envs (``SubprocVecEnv`` for
+``n_envs > 1``), evaluates periodically (``eval/success_rate`` from the env's ``is_success``),
+writes CSV (and TensorBoard, if installed) logs, checkpoints and ``model.zip`` plus
+``config.json`` and ``summary.json`` into ``out``. ``evaluate_policy_success`` runs a saved
+model for seeded episodes and returns the success rate with a 95 % Wilson interval and the
+failure causes. ``register`` adds ``sms3d train-policy`` and ``sms3d eval-policy``.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import time
+import warnings
+from collections import Counter
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ALGOS = ("ppo", "sac")
+POSE_SOURCES = ("oracle", "noisy")
+REWARD_TYPES = ("dense", "sparse")
+
+
+def _tensorboard_available() -> bool:
+    try:
+        import tensorboard  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run depends on (saved as ``config.json`` next to the model).
+
+    Args:
+        algo: ``"ppo"`` or ``"sac"``.
+        total_steps: environment steps over all envs.
+        max_wall_s: stop early (after the current step) once this many seconds have passed.
+        n_envs: parallel envs (``SubprocVecEnv`` if > 1, else ``DummyVecEnv``).
+        pose_source, pose_error_deg, position_noise: the target pose estimate used in training.
+        reward_type: ``"dense"`` or ``"sparse"``.
+        num_mushrooms: mushrooms per generated scene.
+        max_episode_steps: episode limit (the registered env uses 250).
+        eval_freq, checkpoint_freq: in total env steps; 0 disables.
+        eval_episodes: episodes per periodic evaluation (oracle poses, same scenes per eval).
+        learning_rate, batch_size, n_steps (PPO, per env), buffer_size and learning_starts (SAC),
+        gamma, net_arch: algorithm hyper-parameters.
+    """
+
+    algo: str = "ppo"
+    total_steps: int = 100_000
+    max_wall_s: float | None = None
+    n_envs: int = 1
+    pose_source: str = "oracle"
+    pose_error_deg: float = 0.0
+    position_noise: float = 0.0
+    reward_type: str = "dense"
+    num_mushrooms: int = 10
+    max_episode_steps: int = 250
+    seed: int = 0
+    out: str = "runs/policy"
+    eval_freq: int = 20_000
+    eval_episodes: int = 10
+    checkpoint_freq: int = 50_000
+    learning_rate: float = 3e-4
+    batch_size: int = 256
+    n_steps: int = 1024
+    buffer_size: int = 100_000
+    learning_starts: int = 1_000
+    gamma: float = 0.99
+    net_arch: tuple[int, ...] = (256, 256)
+    device: str = "cpu"
+    verbose: int = 1
+
+    def __post_init__(self) -> None:
+        def bad(name: str, why: str) -> ValueError:
+            return ValueError(f"TrainConfig.{name} {why}, got {getattr(self, name)!r}")
+
+        if self.algo not in ALGOS:
+            raise bad("algo", f"must be one of {ALGOS}")
+        if self.pose_source not in POSE_SOURCES:
+            raise bad("pose_source", f"must be one of {POSE_SOURCES}")
+        if self.reward_type not in REWARD_TYPES:
+            raise bad("reward_type", f"must be one of {REWARD_TYPES}")
+        for name in ("total_steps", "n_envs", "num_mushrooms", "max_episode_steps", "eval_episodes",
+                     "batch_size", "n_steps", "buffer_size"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise bad(name, "must be an integer >= 1")
+        for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise bad(name, "must be an integer >= 0")
+        for name in ("pose_error_deg", "position_noise"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise bad(name, "must be a finite number >= 0")
+        if self.pose_source == "oracle" and (self.pose_error_deg > 0 or self.position_noise > 0):
+            raise bad("pose_error_deg", "must be 0 with pose_source='oracle' (use 'noisy')")
+        if self.max_wall_s is not None and not (math.isfinite(self.max_wall_s) and self.max_wall_s > 0):
+            raise bad("max_wall_s", "must be None or a finite number > 0")
+        if not (isinstance(self.learning_rate, (int, float)) and 0 < self.learning_rate < 1):
+            raise bad("learning_rate", "must be in (0, 1)")
+        if not (0 < self.gamma <= 1):
+            raise bad("gamma", "must be in (0, 1]")
+        if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
+            raise bad("net_arch", "must be a non-empty sequence of positive layer widths")
+        if not self.out:
+            raise bad("out", "must be a non-empty path")
+        object.__setattr__(self, "net_arch", tuple(int(h) for h in self.net_arch))
+
+    def env_kwargs(self, pose_source: str | None = None, pose_error_deg: float | None = None) -> dict[str, Any]:
+        return env_kwargs(self.num_mushrooms, pose_source or self.pose_source,
+                          self.pose_error_deg if pose_error_deg is None else pose_error_deg,
+                          self.position_noise, self.reward_type, self.max_episode_steps)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        known = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in d.items() if k in known}
+        if "net_arch" in kw:
+            kw["net_arch"] = tuple(kw["net_arch"])
+        return cls(**kw)
+
+
+def env_kwargs(num_mushrooms: int, pose_source: str, pose_error_deg: float, position_noise: float = 0.0,
+               reward_type: str = "dense", max_episode_steps: int = 250) -> dict[str, Any]:
+    import generator
+
+    return {
+        "scene_config": generator.SceneConfig().replace(placement__num_mushrooms=int(num_mushrooms)),
+        "pose_source": pose_source, "pose_error_deg": float(pose_error_deg),
+        "position_noise": float(position_noise), "reward_type": reward_type,
+        "max_episode_steps": int(max_episode_steps),
+    }
+
+
+def _make_env(**kwargs: Any) -> Any:
+    """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it."""
+    import gymnasium as gym
+
+    import sms3d_env  # noqa: F401  (registers the env ids)
+
+    return gym.make("SMS3DPick-v0", **kwargs)
+
+
+def _vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | None) -> Any:
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    return make_vec_env(functools.partial(_make_env, **kwargs), n_envs=n_envs, seed=seed,
+                        monitor_dir=monitor_dir,
+                        vec_env_cls=SubprocVecEnv if n_envs > 1 else DummyVecEnv,
+                        monitor_kwargs={"info_keywords": ("is_success", "failure_cause")})
+
+
+def _build_model(cfg: TrainConfig, env: Any) -> Any:
+    from stable_baselines3 import PPO, SAC
+
+    policy_kwargs = {"net_arch": list(cfg.net_arch)}
+    if cfg.algo == "ppo":
+        n_steps = cfg.n_steps
+        batch = min(cfg.batch_size, n_steps * cfg.n_envs)
+        return PPO("MultiInputPolicy", env, learning_rate=cfg.learning_rate, n_steps=n_steps,
+                   batch_size=batch, gamma=cfg.gamma, policy_kwargs=policy_kwargs, seed=cfg.seed,
+                   device=cfg.device, verbose=cfg.verbose)
+    return SAC("MultiInputPolicy", env, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
+               learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
+               policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
+
+
+def _wall_clock_callback(max_wall_s: float) -> Any:
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _StopAfter(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.t0 = time.perf_counter()
+
+        def _on_step(self) -> bool:
+            return time.perf_counter() - self.t0 < max_wall_s
+
+    return _StopAfter()
+
+
+def train_policy(cfg: TrainConfig) -> dict[str, Any]:
+    """Train, log and save a policy; returns a summary (also written to ``out/summary.json``).
+
+    Files in ``cfg.out``: ``model.zip`` (final), ``config.json``, ``summary.json``,
+    ``progress.csv`` (SB3 logger; ``eval/success_rate`` rows after each evaluation),
+    TensorBoard events if ``tensorboard`` is installed, ``checkpoints/``, ``best/best_model.zip``,
+    ``eval/evaluations.npz`` and ``monitor/`` (per-episode return, length, is_success).
+    """
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.logger import configure
+
+    # A SubprocVecEnv for training and a DummyVecEnv for evaluation is intended here.
+    warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(json.dumps(asdict(cfg), indent=2))
+    env = _vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"))
+    eval_env = None
+    try:
+        model = _build_model(cfg, env)
+        formats = ["stdout", "csv"] + (["tensorboard"] if _tensorboard_available() else [])
+        if not cfg.verbose:
+            formats.remove("stdout")
+        model.set_logger(configure(str(out), formats))
+        callbacks: list[Any] = []
+        if cfg.eval_freq > 0:
+            # Periodic evaluation under the training pose condition (fixed seeds).
+            eval_env = _vec_env(cfg.env_kwargs(), 1, cfg.seed + 10_000, None)
+            callbacks.append(EvalCallback(
+                eval_env, n_eval_episodes=cfg.eval_episodes, eval_freq=max(cfg.eval_freq // cfg.n_envs, 1),
+                log_path=str(out / "eval"), best_model_save_path=str(out / "best"),
+                deterministic=True, verbose=cfg.verbose, warn=False))
+        if cfg.checkpoint_freq > 0:
+            callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),
+                                                str(out / "checkpoints"), name_prefix=cfg.algo))
+        if cfg.max_wall_s is not None:
+            callbacks.append(_wall_clock_callback(cfg.max_wall_s))
+        t0 = time.perf_counter()
+        model.learn(total_timesteps=cfg.total_steps, callback=CallbackList(callbacks),
+                    progress_bar=False)
+        wall = time.perf_counter() - t0
+        model.save(str(out / "model.zip"))
+        summary = {
+            "algo": cfg.algo, "steps": int(model.num_timesteps), "wall_s": round(wall, 1),
+            "steps_per_s": round(model.num_timesteps / wall, 1) if wall > 0 else math.nan,
+            "n_envs": cfg.n_envs, "pose_source": cfg.pose_source, "pose_error_deg": cfg.pose_error_deg,
+            "model": str(out / "model.zip"), "tensorboard": "tensorboard" in formats,
+        }
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        return summary
+    finally:
+        env.close()
+        if eval_env is not None:
+            eval_env.close()
+
+
+def load_model(model_path: str | Path, algo: str | None = None) -> Any:
+    """Load a saved PPO/SAC model; the algorithm comes from ``config.json`` beside it if not given."""
+    from stable_baselines3 import PPO, SAC
+
+    path = Path(model_path)
+    if algo is None:
+        cfg_file = path.parent / "config.json"
+        if cfg_file.exists():
+            algo = json.loads(cfg_file.read_text()).get("algo")
+    if algo is not None:
+        if algo not in ALGOS:
+            raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
+        return (PPO if algo == "ppo" else SAC).load(str(path), device="cpu")
+    try:
+        return PPO.load(str(path), device="cpu")
+    except Exception:  # not a PPO archive
+        return SAC.load(str(path), device="cpu")
+
+
+def evaluate_policy_success(model_path: str | Path, episodes: int = 30, pose_error_deg: float = 0.0,
+                            seed: int = 0, num_mushrooms: int | None = None,
+                            max_episode_steps: int | None = None, algo: str | None = None,
+                            deterministic: bool = True) -> dict[str, Any]:
+    """Success of a saved policy over seeded episodes with oracle (0 deg) or noisy target poses.
+
+    Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for every model and
+    pose error. Scene size and episode limit come from the model's ``config.json`` unless given.
+
+    Returns ``{"episodes", "successes", "success_rate", "ci95": (lo, hi), "reachable",
+    "success_rate_reachable", "failure_causes": {cause: count}, "mean_return", "mean_steps",
+    "pose_error_deg", "seed", "model"}``.
+    """
+    from sms3d_env.accuracy_study import wilson_interval
+
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be an integer >= 1, got {episodes!r}")
+    if not (math.isfinite(pose_error_deg) and pose_error_deg >= 0):
+        raise ValueError(f"pose_error_deg must be a finite number >= 0, got {pose_error_deg!r}")
+    path = Path(model_path)
+    if not path.exists():
+        raise FileNotFoundError(f"model not found: {path}")
+    saved: dict[str, Any] = {}
+    if (path.parent / "config.json").exists():
+        saved = json.loads((path.parent / "config.json").read_text())
+    model = load_model(path, algo)
+    kw = env_kwargs(num_mushrooms or saved.get("num_mushrooms", 10),
+                    "noisy" if pose_error_deg > 0 else "oracle", pose_error_deg, 0.0,
+                    saved.get("reward_type", "dense"),
+                    max_episode_steps or saved.get("max_episode_steps", 250))
+    env = _make_env(**kw)
+    causes: Counter[str] = Counter()
+    successes = reachable = reach_succ = 0
+    returns, lengths = [], []
+    try:
+        for i in range(episodes):
+            obs, info = env.reset(seed=seed + i)
+            done, total, steps = False, 0.0, 0
+            while not done:
+                action, _ = model.predict(obs, deterministic=deterministic)
+                obs, reward, terminated, truncated, info = env.step(action)
+                total += float(reward)
+                steps += 1
+                done = terminated or truncated
+            ok = bool(info["is_success"])
+            successes += ok
+            reachable += bool(info["reachable"])
+            reach_succ += ok and bool(info["reachable"])
+            if not ok:
+                causes[str(info["failure_cause"])] += 1
+            returns.append(total)
+            lengths.append(steps)
+    finally:
+        env.close()
+    lo, hi = wilson_interval(successes, episodes)
+    return {
+        "model": str(path), "episodes": episodes, "successes": successes,
+        "success_rate": successes / episodes, "ci95": (lo, hi), "reachable": reachable,
+        "success_rate_reachable": reach_succ / reachable if reachable else math.nan,
+        "failure_causes": dict(sorted(causes.items())), "mean_return": float(np.mean(returns)),
+        "mean_steps": float(np.mean(lengths)), "pose_error_deg": float(pose_error_deg), "seed": seed,
+    }
+
+
+# ---------------------------------------------------------------------------------- CLI
+def _cmd_train(args: Any) -> int:
+    pose_source = args.pose_source or ("noisy" if args.pose_error_deg > 0 else "oracle")
+    try:
+        cfg = TrainConfig(algo=args.algo, total_steps=args.steps, max_wall_s=args.max_wall_s,
+                          n_envs=args.n_envs, pose_source=pose_source, pose_error_deg=args.pose_error_deg,
+                          reward_type=args.reward_type, num_mushrooms=args.num_mushrooms, seed=args.seed,
+                          out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
+                          checkpoint_freq=args.checkpoint_freq)
+    except ValueError as e:
+        print(f"error: {e}")
+        return 2
+    summary = train_policy(cfg)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _cmd_eval(args: Any) -> int:
+    try:
+        res = evaluate_policy_success(args.model, episodes=args.episodes, pose_error_deg=args.pose_error_deg,
+                                      seed=args.seed, num_mushrooms=args.num_mushrooms)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"error: {e}")
+        return 2
+    text = json.dumps(res, indent=2)
+    print(text)
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(text)
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``sms3d train-policy`` and ``sms3d eval-policy``."""
+    p = subparsers.add_parser("train-policy", help="train a PPO/SAC pick policy (stable-baselines3)")
+    p.add_argument("--algo", choices=ALGOS, default="ppo")
+    p.add_argument("--steps", type=int, default=100_000, help="total env steps (default 100000)")
+    p.add_argument("--max-wall-s", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--n-envs", type=int, default=1, help="parallel envs (SubprocVecEnv if > 1)")
+    p.add_argument("--pose-source", choices=POSE_SOURCES, default=None,
+                   help="default: noisy if --pose-error-deg > 0, else oracle")
+    p.add_argument("--pose-error-deg", type=float, default=0.0)
+    p.add_argument("--reward-type", choices=REWARD_TYPES, default="dense")
+    p.add_argument("--out", default="runs/policy", help="run folder (model.zip, progress.csv, ...)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--num-mushrooms", type=int, default=10)
+    p.add_argument("--eval-episodes", type=int, default=10, help="episodes per periodic evaluation")
+    p.add_argument("--eval-freq", type=int, default=20_000, help="env steps between evaluations (0: none)")
+    p.add_argument("--checkpoint-freq", type=int, default=50_000, help="env steps between checkpoints (0: none)")
+    p.set_defaults(func=_cmd_train)
+
+    e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy")
+    e.add_argument("--model", required=True, help="path to model.zip")
+    e.add_argument("--episodes", "--eval-episodes", dest="episodes", type=int, default=30)
+    e.add_argument("--pose-error-deg", type=float, default=0.0, help="0: oracle poses")
+    e.add_argument("--seed", type=int, default=1_000_000, help="first episode seed")
+    e.add_argument("--num-mushrooms", type=int, default=None, help="default: the training value")
+    e.add_argument("--json", default=None, help="also write the result here")
+    e.set_defaults(func=_cmd_eval)

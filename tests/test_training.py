@@ -1,0 +1,131 @@
+"""stable-baselines3 pick policies: short PPO/SAC runs, saved models, evaluation, logs, config checks."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sms3d_env.training import (
+    TrainConfig,
+    evaluate_policy_success,
+    load_model,
+    register,
+    train_policy,
+)
+
+FAST = dict(num_mushrooms=8, max_episode_steps=40, eval_freq=128, eval_episodes=1,
+            checkpoint_freq=128, verbose=0, net_arch=(32, 32))
+
+
+def _columns(path) -> list[str]:
+    with open(path, newline="") as f:
+        return next(csv.reader(f))
+
+
+def _check_eval(model_path) -> None:
+    res = evaluate_policy_success(model_path, episodes=2, pose_error_deg=10.0, seed=5)
+    assert 0.0 <= res["success_rate"] <= 1.0
+    lo, hi = res["ci95"]
+    assert 0.0 <= lo <= res["success_rate"] <= hi <= 1.0
+    assert res["episodes"] == 2
+    assert res["successes"] + sum(res["failure_causes"].values()) == 2
+    assert math.isfinite(res["mean_return"])
+
+
+@pytest.fixture(scope="module")
+def ppo_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ppo")
+    cfg = TrainConfig(algo="ppo", total_steps=256, n_steps=128, batch_size=64, out=str(out), **FAST)
+    return out, train_policy(cfg)
+
+
+def test_ppo_writes_model_that_loads_and_acts(ppo_run):
+    out, summary = ppo_run
+    assert summary["steps"] >= 256 and summary["steps_per_s"] > 0
+    assert (out / "model.zip").exists() and (out / "best" / "best_model.zip").exists()
+    assert sorted(p.name for p in (out / "checkpoints").iterdir())  # at least one checkpoint
+    assert json.loads((out / "config.json").read_text())["algo"] == "ppo"
+    model = load_model(out / "model.zip")
+    assert type(model).__name__ == "PPO"
+    obs = {k: np.asarray(v)[None] for k, v in model.observation_space.sample().items()}
+    action, _ = model.predict(obs, deterministic=True)
+    assert action.shape == (1, 7) and np.all(np.abs(action) <= 1.0)
+
+
+def test_ppo_evaluation_rate_and_interval(ppo_run):
+    _check_eval(ppo_run[0] / "model.zip")
+
+
+def test_ppo_csv_log_columns(ppo_run):
+    out, _ = ppo_run
+    cols = _columns(out / "progress.csv")
+    for c in ("eval/success_rate", "eval/mean_reward", "time/total_timesteps", "rollout/ep_rew_mean",
+              "train/value_loss"):
+        assert c in cols, (c, cols)
+    monitor = next((out / "monitor").glob("*.monitor.csv"))
+    assert "is_success" in monitor.read_text().splitlines()[1]
+
+
+def test_sac_short_run(tmp_path):
+    cfg = TrainConfig(algo="sac", total_steps=200, learning_starts=100, batch_size=32, out=str(tmp_path),
+                      **FAST)
+    summary = train_policy(cfg)
+    assert summary["steps"] >= 200
+    assert type(load_model(tmp_path / "model.zip")).__name__ == "SAC"
+    cols = _columns(tmp_path / "progress.csv")
+    assert "eval/success_rate" in cols and "train/actor_loss" in cols
+    _check_eval(tmp_path / "model.zip")
+
+
+@pytest.mark.parametrize(("kw", "field"), [
+    ({"algo": "a2c"}, "algo"),
+    ({"total_steps": 0}, "total_steps"),
+    ({"n_envs": 0}, "n_envs"),
+    ({"pose_source": "camera"}, "pose_source"),
+    ({"pose_error_deg": -1.0}, "pose_error_deg"),
+    ({"pose_error_deg": 10.0}, "pose_error_deg"),  # oracle with an error
+    ({"reward_type": "shaped"}, "reward_type"),
+    ({"num_mushrooms": 0}, "num_mushrooms"),
+    ({"max_wall_s": 0.0}, "max_wall_s"),
+    ({"learning_rate": 0.0}, "learning_rate"),
+    ({"net_arch": ()}, "net_arch"),
+])
+def test_invalid_config_names_field(kw, field):
+    with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
+        TrainConfig(**kw)
+
+
+def test_config_roundtrip_and_frozen():
+    cfg = TrainConfig(pose_source="noisy", pose_error_deg=10.0, net_arch=[64, 64])
+    assert cfg.net_arch == (64, 64)
+    assert TrainConfig.from_dict(json.loads(json.dumps(cfg.__dict__))) == cfg
+    with pytest.raises(AttributeError):
+        cfg.algo = "sac"  # type: ignore[misc]
+
+
+def test_eval_rejects_bad_arguments(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        evaluate_policy_success(tmp_path / "missing.zip", episodes=1)
+    with pytest.raises(ValueError, match="episodes"):
+        evaluate_policy_success(tmp_path / "missing.zip", episodes=0)
+
+
+def test_cli_registers_subcommands():
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="cmd"))
+    a = parser.parse_args(["train-policy", "--algo", "sac", "--steps", "300", "--n-envs", "2",
+                           "--pose-error-deg", "10", "--out", "runs/x", "--seed", "3",
+                           "--num-mushrooms", "8", "--eval-episodes", "4"])
+    assert (a.algo, a.steps, a.n_envs, a.pose_error_deg, a.seed, a.num_mushrooms, a.eval_episodes) == \
+        ("sac", 300, 2, 10.0, 3, 8, 4)
+    assert callable(a.func)
+    b = parser.parse_args(["eval-policy", "--model", "m.zip", "--eval-episodes", "30",
+                           "--pose-error-deg", "30"])
+    assert (b.episodes, b.pose_error_deg) == (30, 30.0) and callable(b.func)
+    bad = parser.parse_args(["train-policy", "--n-envs", "0"])
+    assert bad.func(bad) == 2
