@@ -39,9 +39,13 @@ class Intrinsics:
 
 
 def camera_intrinsics(config: CameraConfig) -> Intrinsics:
-    """Intrinsics of the preset, scaled to the configured height (square pixels, centred)."""
+    """Intrinsics of the preset, scaled to the configured height (square pixels).
+
+    The principal point is where MuJoCo renders the optical axis: on the corner shared by the
+    four centre pixels, ``(W/2 - 0.5, H/2 - 0.5)`` in OpenCV's convention (pixel centres at
+    integers)."""
     f = FOCAL_PX_640x480[config.preset] * config.height / 480.0
-    return Intrinsics(config.width, config.height, f, f, config.width / 2.0, config.height / 2.0)
+    return Intrinsics(config.width, config.height, f, f, config.width / 2.0 - 0.5, config.height / 2.0 - 0.5)
 
 
 def camera_rotation_mujoco(tilt_deg: float) -> np.ndarray:

@@ -47,12 +47,8 @@ class Frame:
 
 
 def render_intrinsics(scene: Scene) -> Intrinsics:
-    """Intrinsics of the rendered image in OpenCV's pixel convention (pixel centres at integers).
-
-    MuJoCo puts the optical axis on the corner shared by the four centre pixels, i.e. at
-    ``(W/2 - 0.5, H/2 - 0.5)`` in OpenCV pixel coordinates."""
-    intr = camera_intrinsics(scene.config.camera)
-    return Intrinsics(intr.width, intr.height, intr.fx, intr.fy, intr.width / 2.0 - 0.5, intr.height / 2.0 - 0.5)
+    """Intrinsics of the rendered image in OpenCV's pixel convention (pixel centres at integers)."""
+    return camera_intrinsics(scene.config.camera)
 
 
 class SceneRenderer:
