@@ -31,6 +31,12 @@ _DECODERS = {
     "quat": rot.quaternion_to_matrix,
     "euler": rot.euler_to_matrix,
 }
+_UPRIGHT_BIAS = {
+    "6d": torch.tensor([1.0, 0, 0, 0, -1.0, 0]),
+    "9d": torch.tensor([1.0, 0, 0, 0, -1.0, 0, 0, 0, -1.0]),
+    "quat": torch.tensor([0.0, 1.0, 0, 0]),  # pi about x
+    "euler": torch.tensor([torch.pi, 0.0, 0.0]),  # roll = pi
+}
 CHECKPOINT_FORMAT = "sms3d-posenet"
 CHECKPOINT_VERSION = 1
 
@@ -89,9 +95,10 @@ class PoseNet(nn.Module):
             nn.Linear(c, config.hidden), nn.ReLU(inplace=True), nn.Linear(config.hidden, HEAD_DIMS[config.head])
         )
         self._decode = _DECODERS[config.head]
-        if config.head == "6d":  # start at an upright mushroom seen from above: R = diag(1, -1, -1)
-            with torch.no_grad():
-                self.head[-1].bias.copy_(torch.tensor([1.0, 0, 0, 0, -1.0, 0]))
+        # Every head starts at the same prior, an upright mushroom seen from above:
+        # R = diag(1, -1, -1) in the OpenCV camera frame (a fair start for the head ablation).
+        with torch.no_grad():
+            self.head[-1].bias.copy_(_UPRIGHT_BIAS[config.head])
 
     def raw(self, x: torch.Tensor) -> torch.Tensor:
         """The head's raw representation ``(B, head_dim)``."""
