@@ -44,9 +44,12 @@ def _quat(rotation: np.ndarray) -> np.ndarray:
     return q
 
 
-def scene_to_spec(scene: Scene, *, mushroom_collisions: bool = False, shadows: bool = False) -> mujoco.MjSpec:
+def scene_to_spec(scene: Scene, *, mushroom_collisions: bool = False, shadows: bool = False,
+                  free_ids: set[int] | None = None) -> mujoco.MjSpec:
     """Build the scene's ``MjSpec``. Mushroom geoms collide only if ``mushroom_collisions``
-    (welded mushrooms need no contacts; the environment switches them on where it needs them)."""
+    (welded mushrooms need no contacts; the environment switches them on where it needs them).
+    ``free_ids``: if given, only these mushrooms get a free joint and a root weld; the others are
+    static bodies fixed to the world (no degrees of freedom: a much faster simulation)."""
     spec = mujoco.MjSpec()
     spec.modelname = f"sms3d_scene_{scene.seed}"
     spec.option.timestep = 0.002
@@ -95,7 +98,9 @@ def scene_to_spec(scene: Scene, *, mushroom_collisions: bool = False, shadows: b
         scale = inst.scale_vector
         name = f"mushroom_{inst.id}"
         body = world.add_body(name=name, pos=inst.position, quat=_quat(inst.rotation))
-        body.add_freejoint(name=f"{name}_joint")
+        free = free_ids is None or inst.id in free_ids
+        if free:
+            body.add_freejoint(name=f"{name}_joint")
         part_volumes = {"cap": model.cap_mesh.volume, "stem": model.stem_mesh.volume}
         total = sum(part_volumes.values())
         for part, mesh in (("cap", model.cap_mesh), ("stem", model.stem_mesh)):
@@ -105,6 +110,8 @@ def scene_to_spec(scene: Scene, *, mushroom_collisions: bool = False, shadows: b
                           material=f"{inst.species}_{part}", mass=inst.mass * part_volumes[part] / total,
                           contype=contype, conaffinity=contype, condim=4, friction=[0.8, 0.01, 0.001])
         body.add_site(name=f"{name}_cap_top", pos=[0, 0, model.cap_top_z * scale[2]], size=[0.002, 0, 0], group=4)
+        if not free:
+            continue
         root = spec.add_equality(name=f"{name}_root", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
                                  name1=name, name2="world", active=True)
         # Anchor at the stem base; a zero relative pose means "as placed" (MjSpec's default

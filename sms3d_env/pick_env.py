@@ -37,6 +37,7 @@ from sms3d_env.targets import Reachability, select_target
 FAILURE_CAUSES = ("no_seal", "grip_lost", "not_detached", "bruised", "neighbour_disturbed",
                   "unreachable", "timeout", "unstable_simulation")
 _EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+_BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
 
 
 @dataclass
@@ -71,6 +72,10 @@ class SMS3DPickEnv(gym.Env):
             position noise standard deviation (m).
         target_rule: ``"tallest"``, ``"largest"``, ``"index"`` (with ``target_index``),
             ``"random"``; ``options={"target": i}`` overrides it for one reset.
+        free_radius: only mushrooms whose stem base lies within this distance (m) of the
+            target's keep a free joint and a root weld (they can be disturbed or detached); the
+            others are static bodies, which makes the simulation several times faster. ``None``:
+            every mushroom is free.
         reward_type: ``"dense"`` or ``"sparse"``.
         control_dt, substeps: control period (s) and physics steps per control step.
         image_obs: add ``rgb`` (uint8) and ``depth`` (float32, m) of ``image_size`` to the
@@ -100,6 +105,7 @@ class SMS3DPickEnv(gym.Env):
         camera: str = "overhead",
         render_size: tuple[int, int] = (480, 640),
         max_tilt_deg: float = 45.0,
+        free_radius: float | None = 0.10,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
@@ -126,6 +132,7 @@ class SMS3DPickEnv(gym.Env):
         self.image_obs, self.image_size = image_obs, tuple(image_size)
         self.camera, self.render_size = camera, tuple(render_size)
         self.max_tilt_deg = max_tilt_deg
+        self.free_radius = free_radius
 
         self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
         self.home_q = np.asarray(self.robot_cfg.home_q, float)
@@ -164,18 +171,27 @@ class SMS3DPickEnv(gym.Env):
             cfg = generator.SceneConfig().replace(placement__num_mushrooms=25)
         return generator.generate_scene(cfg, seed=int(self.np_random.integers(2**31 - 1)))
 
-    def _build(self, scene: Any) -> None:
+    def _build(self, scene: Any, target: int) -> None:
         from generator.mjcf import scene_to_spec
 
-        spec = scene_to_spec(scene)
         n = len(scene.instances)
+        base = np.array([np.asarray(inst.position, float) for inst in scene.instances])
+        if self.free_radius is None:
+            free = set(range(n))
+        else:
+            near = np.linalg.norm(base - base[target], axis=1) <= self.free_radius
+            free = {int(i) for i in np.nonzero(near)[0]} | {int(target)}
+        self.is_free = np.array([i in free for i in range(n)])
+        spec = scene_to_spec(scene, free_ids=free)
         for inst in scene.instances:
+            if inst.id not in free:
+                continue
             # The root weld's anchor is given in body2's frame, and body2 is the world: put it at
             # the stem base. (At the world origin, as generated, the weld is a pendulum about the
             # origin: a rooted mushroom 10 cm away swings by centimetres under small loads.)
             spec.equality(f"mushroom_{inst.id}_root").data[:3] = np.asarray(inst.position, float)
         attach_robot(spec, self.robot_cfg)
-        for i in range(n):
+        for i in sorted(free):
             spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
                               objtype=mujoco.mjtObj.mjOBJ_BODY, name1=PREFIX + CUP_BODY,
                               name2=f"mushroom_{i}", active=False)
@@ -188,14 +204,16 @@ class SMS3DPickEnv(gym.Env):
         terrain = m.geom("terrain").id
         m.geom_contype[terrain], m.geom_conaffinity[terrain] = ph.SOIL_CONTYPE, ph.SOIL_CONAFFINITY
         self.body_ids = np.array([m.body(f"mushroom_{i}").id for i in range(n)])
-        self.dofadr = np.array([m.jnt_dofadr[m.joint(f"mushroom_{i}_joint").id] for i in range(n)])
+        self.dofadr = np.array([m.jnt_dofadr[m.joint(f"mushroom_{i}_joint").id] if i in free else -1
+                                for i in range(n)])
         self.cap_geoms = np.array([m.geom(f"mushroom_{i}_cap").id for i in range(n)])
         self.stem_geoms = np.array([m.geom(f"mushroom_{i}_stem").id for i in range(n)])
         self.cap_top_sites = np.array([m.site(f"mushroom_{i}_cap_top").id for i in range(n)])
-        self.root_eq = np.array([m.equality(f"mushroom_{i}_root").id for i in range(n)])
-        self.grip_eq = np.array([m.equality(f"grip_{i}").id for i in range(n)])
+        self.root_eq = np.array([m.equality(f"mushroom_{i}_root").id if i in free else -1
+                                 for i in range(n)])
+        self.grip_eq = np.array([m.equality(f"grip_{i}").id if i in free else -1 for i in range(n)])
         self.is_root_eq = np.zeros(m.neq, bool)
-        self.is_root_eq[self.root_eq] = True
+        self.is_root_eq[self.root_eq[self.root_eq >= 0]] = True
         self.geom_mushroom = np.full(m.ngeom, -1)
         self.geom_mushroom[self.cap_geoms] = np.arange(n)
         self.geom_mushroom[self.stem_geoms] = np.arange(n)
@@ -225,8 +243,6 @@ class SMS3DPickEnv(gym.Env):
         super().reset(seed=seed)
         options = dict(options or {})
         scene = self._scene_for_reset(options)
-        self._build(scene)
-        m, d = self.model, self.data
         ep = _EpisodeState()
         if "target" in options:
             ep.target, ep.reachable = select_target(scene, "index", self.np_random, self.reach,
@@ -237,6 +253,8 @@ class SMS3DPickEnv(gym.Env):
                                                     self.reach, index=self.target_index,
                                                     max_tilt_deg=self.max_tilt_deg)
         ep.estimate = self.pose_source(scene, ep.target, self.np_random)
+        self._build(scene, ep.target)
+        m, d = self.model, self.data
         self._ep = ep
         d.qpos[self.arm_qadr] = self.home_q
         d.ctrl[:6] = self.home_q
@@ -268,14 +286,15 @@ class SMS3DPickEnv(gym.Env):
             d.ctrl[:6] = self.ik.step(twist, d.qpos[self.arm_qadr].copy())
         except Exception:  # mink raises when the QP has no solution: hold the last command
             pass
+        badqacc = d.warning[_BADQACC]
         for _ in range(self.substeps):
             mujoco.mj_step(m, d)
-            if (d.warning[int(mujoco.mjtWarning.mjWARN_BADQACC)].number > 0
-                    or not np.all(np.isfinite(d.qpos))):
-                ep.unstable = True
-                break
             if d.ncon > 0 or ep.grip >= 0:
+                if badqacc.number > 0:
+                    break
                 self._picking_physics()
+        if badqacc.number > 0 or not np.all(np.isfinite(d.qpos)):
+            ep.unstable = True
         self.steps += 1
         self._update_neighbours()
         success = self._success()
@@ -311,13 +330,13 @@ class SMS3DPickEnv(gym.Env):
                     if self.is_cap[g] and fn > p.bruise_force:
                         ep.bruised.add(int(k))
                     if (other == self.cup_geom and self.is_cap[g] and ep.suction_on
-                            and ep.grip < 0 and fn >= p.seal_force):
+                            and ep.grip < 0 and fn >= p.seal_force and self.grip_eq[k] >= 0):
                         normal = d.contact.frame[c][:3] * (1.0 if g1 == self.cup_geom else -1.0)
                         if self._seals(int(k), d.contact.pos[c], normal):
                             self._grip(int(k), d.contact.pos[c].copy())
         if ep.grip >= 0:
             touched.add(ep.grip)
-        rooted = [k for k in touched if d.eq_active[self.root_eq[k]]]
+        rooted = [k for k in touched if self.root_eq[k] >= 0 and d.eq_active[self.root_eq[k]]]
         if rooted:
             self._check_roots(rooted)
         if ep.grip >= 0:

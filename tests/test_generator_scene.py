@@ -159,3 +159,19 @@ def test_terrain_height_at_is_bilinear():
     assert terrain.height_at(-1.0, 1.0) == 2.0
     assert terrain.height_at(0.0, 0.0) == pytest.approx(1.5)
     json.dumps(dataclasses.asdict(SceneConfig()))
+
+
+def test_free_ids_makes_other_mushrooms_static(scene):
+    n = len(scene.instances)
+    full = scene_to_spec(scene).compile()
+    assert full.nv == 6 * n and full.neq == n  # default unchanged: every mushroom free and rooted
+    free = {0, 2}
+    m = scene_to_spec(scene, free_ids=free).compile()
+    assert m.nv == 6 * len(free) and m.neq == len(free)
+    for inst in scene.instances:
+        b = m.body(f"mushroom_{inst.id}")
+        assert (b.jntnum[0] == 1) == (inst.id in free)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    for inst in scene.instances:  # static or free, each mushroom stands where it was placed
+        np.testing.assert_allclose(d.xpos[m.body(f"mushroom_{inst.id}").id], inst.position, atol=1e-9)
