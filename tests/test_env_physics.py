@@ -66,17 +66,3 @@ def test_failure_cause_vocabulary():
         *_, te, tr, info = env.step(np.zeros(7, np.float32))
     assert info["failure_cause"] in sms3d_env.FAILURE_CAUSES
     assert info["is_success"] is False
-
-
-@pytest.mark.slow
-def test_scripted_picker_oracle_and_pose_error():
-    def rate(err):
-        env = gym.make("SMS3DPick-v0", pose_source="noisy", pose_error_deg=err)
-        pol = sms3d_env.ScriptedPicker.for_env(env)
-        res = [sms3d_env.run_episode(env, pol, seed=s) for s in range(40)]
-        reach = [r for r in res if r["reachable"]]
-        return sum(r["success"] for r in reach) / max(1, len(reach))
-
-    oracle = rate(0.0)
-    assert oracle >= 0.95
-    assert rate(30.0) < oracle - 0.2
