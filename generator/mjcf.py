@@ -114,9 +114,11 @@ def scene_to_spec(scene: Scene, *, mushroom_collisions: bool = False, shadows: b
             continue
         root = spec.add_equality(name=f"{name}_root", type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
                                  name1=name, name2="world", active=True)
-        # Anchor at the stem base; a zero relative pose means "as placed" (MjSpec's default
-        # anchor is (0, 1, 0), which would hold the mushroom a metre away from its stem).
+        # The anchor is given in body2's frame (the world): put it at the stem base, so the root
+        # resists bending about the stem base rather than swinging about the world origin. A zero
+        # relative pose means "as placed".
         root.data[:10] = 0.0
+        root.data[:3] = inst.position
         # Stiff and hard: with MuJoCo's default soft weld a light, top-heavy mushroom sags and
         # tips over within a second; this holds it within a millimetre.
         root.solref = ROOT_SOLREF

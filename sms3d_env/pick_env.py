@@ -183,13 +183,6 @@ class SMS3DPickEnv(gym.Env):
             free = {int(i) for i in np.nonzero(near)[0]} | {int(target)}
         self.is_free = np.array([i in free for i in range(n)])
         spec = scene_to_spec(scene, free_ids=free)
-        for inst in scene.instances:
-            if inst.id not in free:
-                continue
-            # The root weld's anchor is given in body2's frame, and body2 is the world: put it at
-            # the stem base. (At the world origin, as generated, the weld is a pendulum about the
-            # origin: a rooted mushroom 10 cm away swings by centimetres under small loads.)
-            spec.equality(f"mushroom_{inst.id}_root").data[:3] = np.asarray(inst.position, float)
         attach_robot(spec, self.robot_cfg)
         for i in sorted(free):
             spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,

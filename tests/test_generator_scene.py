@@ -112,6 +112,13 @@ def test_write_mjcf_loads_from_disk(scene, tmp_path):
     assert model.nhfield == 1
 
 
+def test_root_weld_anchored_at_stem_base(scene):
+    model = scene_to_model(scene)
+    for inst in scene.instances:
+        eq = model.equality(f"mushroom_{inst.id}_root")
+        assert np.allclose(eq.data[:3], inst.position)
+
+
 def test_welded_mushrooms_stay_put(scene):
     model = scene_to_model(scene)
     data = mujoco.MjData(model)
