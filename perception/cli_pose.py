@@ -4,7 +4,8 @@
 ``func`` to a callable taking the parsed args and returning an exit code. Runnable standalone as
 ``python -m perception.cli_pose {train-pose,eval-pose} ...``.
 
-Data: ``--data`` reads per-instance samples from a ``.npz`` in the :mod:`perception.data`
+Data: ``--scenes DIR`` reads per-instance clouds from a rendered scene dataset
+(``generator.dataset``; splits train/val, or ``--split`` for evaluation); ``--data`` reads per-instance samples from a ``.npz`` in the :mod:`perception.data`
 format (``--val-data`` likewise); without it, single-mushroom views are rendered on the fly by
 :mod:`perception.synthetic_views` from the generator's model library with the given seeds.
 """
@@ -20,7 +21,7 @@ from pathlib import Path
 
 import torch
 
-from perception.data import PointCloudPoseDataset, load_samples, save_samples
+from perception.data import PointCloudPoseDataset, load_samples, samples_from_scenes, save_samples
 from perception.errors import PerceptionConfigError
 from perception.pose_net import PoseNetConfig, load_checkpoint
 from perception.synthetic_views import default_models, generate_samples
@@ -65,8 +66,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     cache = Path(args.cache) if args.cache else None
-    train_s = _samples(args.data, args.num_train, args.seed * 1000 + 1, args.model_ids, cache, "train")
-    val_s = _samples(args.val_data, args.num_val, args.seed * 1000 + 2, args.model_ids, cache, "val")
+    if args.scenes:
+        train_s = samples_from_scenes(args.scenes, "train", cap_only=args.cap_only, seed=args.seed)
+        val_s = samples_from_scenes(args.scenes, "val", cap_only=args.cap_only, seed=args.seed + 1)
+    else:
+        train_s = _samples(args.data, args.num_train, args.seed * 1000 + 1, args.model_ids, cache, "train")
+        val_s = _samples(args.val_data, args.num_val, args.seed * 1000 + 2, args.model_ids, cache, "val")
     tr = PointCloudPoseDataset(train_s, net.num_points, net.use_rgb, cfg.augment, seed=args.seed)
     va = PointCloudPoseDataset(val_s, net.num_points, net.use_rgb, None, seed=args.seed + 1)
     t = time.perf_counter()
@@ -83,7 +88,10 @@ def cmd_eval(args: argparse.Namespace) -> int:
     path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
     model, extra = load_checkpoint(path, map_location=args.device)
     net = model.config
-    samples = _samples(args.data, args.num, args.seed, args.model_ids, None, "test")
+    if args.scenes:
+        samples = samples_from_scenes(args.scenes, args.split, cap_only=args.cap_only, seed=args.seed)
+    else:
+        samples = _samples(args.data, args.num, args.seed, args.model_ids, None, "test")
     ds = PointCloudPoseDataset(samples, net.num_points, net.use_rgb, None, seed=args.seed)
     _, m, *_ = evaluate(model, ds, device=args.device)
     print(json.dumps({"checkpoint": str(path), "config": net.to_dict(), **m.as_dict()}, indent=2))
@@ -108,6 +116,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--model-ids", type=_ids, default=DEFAULT_TRAIN_MODEL_IDS, help="generator model ids to render")
     p.add_argument("--data", help="training samples .npz (perception.data format) instead of rendering")
     p.add_argument("--val-data", help="validation samples .npz")
+    p.add_argument("--scenes", help="rendered scene dataset folder (generator.dataset): its train/val splits")
+    p.add_argument("--cap-only", action="store_true", help="with --scenes: cap points only")
     p.add_argument("--cache", help="folder to cache rendered views as .npz")
     p.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this wall time")
     p.add_argument("--seed", type=int, default=0)
@@ -120,6 +130,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e = subparsers.add_parser("eval-pose", help="evaluate a pose checkpoint (default: shipped weights)")
     e.add_argument("--checkpoint", help="checkpoint path (default: perception/weights/posenet_default.pt)")
     e.add_argument("--data", help="samples .npz; default: render --num views with --seed")
+    e.add_argument("--scenes", help="rendered scene dataset folder (generator.dataset)")
+    e.add_argument("--split", default="test", help="with --scenes: which split")
+    e.add_argument("--cap-only", action="store_true", help="with --scenes: cap points only")
     e.add_argument("--num", type=int, default=500)
     e.add_argument("--seed", type=int, default=12345)
     e.add_argument("--model-ids", type=_ids, default=None, help="generator model ids (default: all)")

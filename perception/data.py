@@ -147,3 +147,23 @@ class PointCloudPoseDataset(Dataset):
             pts, cols = augment_points(pts, self.augment, rng, cols)
         x = to_tensor(pts, cols)
         return x, torch.from_numpy(np.asarray(s.rotation, np.float32)), i
+
+
+def samples_from_scenes(
+    root: str | Path, split: str | None = None, num_points: int = 2048, cap_only: bool = False, seed: int = 0
+) -> list[PointCloudSample]:
+    """Per-instance samples from a rendered scene dataset (``generator.dataset`` layout).
+
+    Wraps ``generator.dataset.readers.InstancePointCloudDataset``: points are back-projected
+    under each instance's visible mask (whole mushroom, or the cap with ``cap_only``) and
+    sampled to ``num_points``; rotations are in the OpenCV camera frame.
+    """
+    from generator.dataset.readers import InstancePointCloudDataset
+
+    ds = InstancePointCloudDataset(root, split, num_points=num_points, cap_only=cap_only, min_points=MIN_POINTS, seed=seed)
+    out = []
+    for i in range(len(ds)):
+        item = ds[i]
+        meta = dict(item["meta"])
+        out.append(PointCloudSample(item["points"].numpy(), item["rotation"].numpy(), None, meta))
+    return out
