@@ -37,7 +37,7 @@ class ControllerConfig:
     max_lead: float = 0.03
     position_cost: float = 1.0
     orientation_cost: float = 0.3
-    posture_cost: float = 1e-3
+    posture_cost: float = 1e-2
     damping: float = 1e-4
 
     def __post_init__(self) -> None:
@@ -67,7 +67,10 @@ class IKController:
                                   for j in ARM_JOINTS])
         self.frame_task = mink.FrameTask(self.site, "site", position_cost=cfg.position_cost,
                                          orientation_cost=cfg.orientation_cost, lm_damping=1e-3)
-        self.posture_task = mink.PostureTask(self.model, cost=cfg.posture_cost)
+        # No posture cost on joint 6 (the tool roll): the picker leaves the roll free.
+        cost = np.full(self.model.nv, cfg.posture_cost)
+        cost[self.model.jnt_dofadr[self.model.joint(PREFIX + ARM_JOINTS[-1]).id]] = 0.0
+        self.posture_task = mink.PostureTask(self.model, cost=cost)
         vel = {PREFIX + j: cfg.max_joint_speed for j in ARM_JOINTS}
         self.limits = [mink.ConfigurationLimit(self.model), mink.VelocityLimit(self.model, vel)]
         self.q_home = self.model.qpos0.copy()

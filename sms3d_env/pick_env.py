@@ -251,7 +251,12 @@ class SMS3DPickEnv(gym.Env):
         self._ep = ep
         d.qpos[self.arm_qadr] = self.home_q
         d.ctrl[:6] = self.home_q
-        self.ik.reset(self.home_q, self.home_q)
+        # Posture target of the IK: the arm's configuration at a pre-grasp pose above the
+        # *estimated* target (the pose the policy sees). Home holds the cup pointing down near the
+        # Jaco's wrist singularity (joint 5 ~ 0, joints 4 and 6 aligned); a posture target at home
+        # let the differential IK stall there, centimetres short of some pre-grasp poses.
+        q_pre = self.reach.solve(ep.estimate.cap_top, ep.estimate.stem_axis, (0.05, 0.03))
+        self.ik.reset(self.home_q, self.home_q if q_pre is None else q_pre)
         mujoco.mj_forward(m, d)
         for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
             mujoco.mj_step(m, d)

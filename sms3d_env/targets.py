@@ -50,16 +50,22 @@ class Reachability:
         r = self.data.site_xmat[self.site].reshape(3, 3)
         return np.r_[(self.data.site_xpos[self.site] - pos) * 10, r[:, 2] - z]
 
-    def reachable(self, cap_top: np.ndarray, axis: np.ndarray, standoff: float = 0.05) -> bool:
+    def solve(self, cap_top: np.ndarray, axis: np.ndarray, offsets: tuple[float, ...] = (0.05, 0.0)
+              ) -> np.ndarray | None:
+        """Joint angles with the cup on the stem axis ``offsets[-1]`` above the cap top, facing
+        down the axis, solved from home through the earlier offsets; None if one fails."""
         z = -np.asarray(axis) / np.linalg.norm(axis)
         q = self.home
-        for offset in (standoff, 0.0):
+        for offset in offsets:
             sol = least_squares(self._res, q, bounds=(self.lo, self.hi), max_nfev=100,
                                 args=(np.asarray(cap_top) - z * offset, z))
             if sol.cost > 1e-6:
-                return False
+                return None
             q = np.clip(sol.x, self.lo + 1e-6, self.hi - 1e-6)
-        return True
+        return q
+
+    def reachable(self, cap_top: np.ndarray, axis: np.ndarray, standoff: float = 0.05) -> bool:
+        return self.solve(cap_top, axis, (standoff, 0.0)) is not None
 
 
 def select_target(scene: Any, rule: str, rng: np.random.Generator, reach: Reachability,
