@@ -35,7 +35,7 @@ class ScriptedPicker:
     3. ``twist``: rotate about the estimated stem axis through the cup ("twist, do not pull"),
        with a slight pull along the axis and an optional gentle bend about the estimated stem
        base; a wrong axis turns part of the twist into bending of the root and the seal;
-    4. ``lift``: straight up.
+    4. ``lift``: straight up, the speed ramped up (no jerk on the seal).
 
     Args:
         max_linear_speed, max_angular_speed: the env's action scales (m/s, rad/s).
@@ -45,6 +45,7 @@ class ScriptedPicker:
         twist_rate: rad/s about the estimated axis during ``twist_steps`` control steps.
         bend_rate: rad/s of gentle bend (about a horizontal axis, pivot at the estimated stem base).
         pull_speed: slight withdrawal along the axis while twisting (m/s).
+        lift_speed, lift_ramp_steps: lift speed (m/s), reached linearly over this many steps.
         settle_steps: still steps after the seal forms (the arm stops pressing).
     """
 
@@ -52,12 +53,12 @@ class ScriptedPicker:
                  control_dt: float = 0.04, standoff: float = 0.03, stem_height: float = 0.04,
                  descend_speed: float = 0.02, twist_rate: float = 0.8, bend_rate: float = 0.0,
                  twist_steps: int = 30, pull_speed: float = 0.002, settle_steps: int = 2,
-                 lift_speed: float = 0.06) -> None:
+                 lift_speed: float = 0.06, lift_ramp_steps: int = 5) -> None:
         self.vmax, self.wmax, self.dt = max_linear_speed, max_angular_speed, control_dt
         self.standoff, self.stem_height = standoff, stem_height
         self.descend_speed, self.bend_rate, self.twist_rate = descend_speed, bend_rate, twist_rate
         self.twist_steps, self.pull_speed, self.settle_steps = twist_steps, pull_speed, settle_steps
-        self.lift_speed = lift_speed
+        self.lift_speed, self.lift_ramp_steps = lift_speed, lift_ramp_steps
         self.reset()
 
     @classmethod
@@ -69,6 +70,7 @@ class ScriptedPicker:
         self.phase = "approach"
         self.count = 0
         self.descended = 0.0
+        self.lift_count = 0
 
     def _action(self, v: np.ndarray, w: np.ndarray, suction: bool) -> np.ndarray:
         a = np.concatenate([v / self.vmax, w / self.wmax, [1.0 if suction else -1.0]])
@@ -87,9 +89,10 @@ class ScriptedPicker:
             ang = np.degrees(np.arccos(np.clip(z @ -axis, -1, 1)))
             if np.linalg.norm(err) < 0.003 and ang < 3.0:
                 self.phase = "descend"
-            v = 4.0 * err
-            n = np.linalg.norm(v)
-            v = v if n < self.vmax else v / n * self.vmax
+            # Proportional, at least 2 cm/s until the tolerance (no slow creep near the goal).
+            n_err = np.linalg.norm(err)
+            speed = min(self.vmax, max(4.0 * n_err, 0.02))
+            v = err / max(n_err, 1e-9) * speed
             return self._action(v, w_align, False)
         if self.phase == "descend":
             if gripped:
@@ -123,7 +126,10 @@ class ScriptedPicker:
                 w = w + wb
                 v = v + np.cross(wb, p - (c - axis * self.stem_height))
             return self._action(v, w, True)
-        return self._action(np.array([0.0, 0.0, self.lift_speed]), np.zeros(3), True)
+        # Lift straight up, the speed ramped up over ``lift_ramp_steps`` (no jerk on the seal).
+        self.lift_count += 1
+        speed = self.lift_speed * min(1.0, self.lift_count / self.lift_ramp_steps)
+        return self._action(np.array([0.0, 0.0, speed]), np.zeros(3), True)
 
 
 def run_episode(env: gym.Env, policy: Any, seed: int, options: dict[str, Any] | None = None) -> dict[str, Any]:
