@@ -66,3 +66,25 @@ def test_failure_cause_vocabulary():
         *_, te, tr, info = env.step(np.zeros(7, np.float32))
     assert info["failure_cause"] in sms3d_env.FAILURE_CAUSES
     assert info["is_success"] is False
+
+
+def test_wrist_hand_and_tool_collide_with_soil_and_mushrooms_not_with_the_arm():
+    env = gym.make("SMS3DPick-v0", scene_config=SMALL).unwrapped
+    env.reset(seed=0)
+    m = env.model
+
+    def collide(g1: int, g2: int) -> bool:
+        return bool((m.geom_contype[g1] & m.geom_conaffinity[g2])
+                    or (m.geom_contype[g2] & m.geom_conaffinity[g1]))
+
+    soil = m.geom("terrain").id
+    cap = int(env.cap_geoms[env._ep.target])
+    names = ["jaco/ring_5", "jaco/link_5", "jaco/ring_6", "jaco/tube", "jaco/flange", "jaco/cup_face"]
+    geoms = [m.geom(n).id for n in names]
+    for g in geoms:
+        assert collide(g, soil) and collide(g, cap), m.geom(g).name
+        body = m.geom_bodyid[g]  # the broadphase prunes by the per-body unions of the masks
+        assert m.body_contype[body] & m.geom_contype[g] == m.geom_contype[g]
+    for g1 in geoms:
+        for g2 in geoms:
+            assert not collide(g1, g2)
