@@ -1,0 +1,51 @@
+"""Stage 1 detectors behind one interface: instance masks with boxes and scores.
+
+``detections_from_labels`` is the oracle: it reads MuJoCo's segmentation render (instance labels,
+id + 1, 0 = background), so the pose network can be measured alone. A learned detector (Mask
+R-CNN) implements the same ``Detector`` protocol.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Detection:
+    """One detected mushroom: a boolean mask, its box ``(x0, y0, x1, y1)`` in pixels (inclusive
+    corners), a score, and the ground-truth instance id when the detector knows it (oracle)."""
+
+    mask: np.ndarray
+    box: tuple[int, int, int, int]
+    score: float
+    instance_id: int | None = None
+
+    @property
+    def area(self) -> int:
+        return int(self.mask.sum())
+
+
+class Detector(Protocol):
+    def detect(self, rgb: np.ndarray) -> list[Detection]: ...
+
+
+def detections_from_labels(labels: np.ndarray, min_pixels: int = 1) -> list[Detection]:
+    """Oracle detections from an instance label image (uint, id + 1 per instance, 0 background),
+    ordered by instance id; instances with fewer than ``min_pixels`` visible pixels are left out."""
+    labels = np.asarray(labels)
+    if labels.ndim != 2 or not np.issubdtype(labels.dtype, np.integer):
+        raise ValueError(f"labels: expected an (H, W) integer image, got {labels.shape} {labels.dtype}")
+    detections = []
+    for value in np.unique(labels):
+        if value == 0:
+            continue
+        mask = labels == value
+        if mask.sum() < min_pixels:
+            continue
+        rows, cols = np.nonzero(mask)
+        box = (int(cols.min()), int(rows.min()), int(cols.max()), int(rows.max()))
+        detections.append(Detection(mask, box, 1.0, int(value) - 1))
+    return detections

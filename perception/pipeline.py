@@ -1,0 +1,113 @@
+"""The two-stage pose pipeline: masks from a detector, then the pose network on each mushroom's
+points. ``(rgb, depth, intrinsics, world_from_camera) -> [MushroomEstimate]``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from generator.camera import Intrinsics
+from generator.dataset.backproject import backproject
+from perception.detector import Detection, Detector
+from perception.estimator import PoseEstimator
+
+# Planar depth of a bed seen from 7 cm to 2 m: a median outside this range is the wrong unit.
+PLAUSIBLE_DEPTH_M = (0.05, 3.0)
+
+
+class PipelineInputError(ValueError):
+    """An input the pipeline cannot use (shape, dtype, unit, intrinsics); the message says which."""
+
+
+@dataclass(frozen=True)
+class MushroomEstimate:
+    """One mushroom's estimated pose in the camera frame (OpenCV axes) and in the world."""
+
+    detection: Detection
+    rotation_cam: np.ndarray  # (3, 3) camera-from-mushroom
+    centre_cam: np.ndarray  # centroid of the mushroom's observed points
+    cap_top_cam: np.ndarray  # highest observed point along the estimated stem axis, on the axis
+    rotation_world: np.ndarray
+    centre_world: np.ndarray
+    cap_top_world: np.ndarray
+    num_points: int
+
+    @property
+    def stem_axis_cam(self) -> np.ndarray:
+        return self.rotation_cam[:, 2].copy()
+
+    @property
+    def stem_axis_world(self) -> np.ndarray:
+        return self.rotation_world[:, 2].copy()
+
+
+def check_inputs(rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, world_from_camera: np.ndarray) -> None:
+    """Raise ``PipelineInputError`` for inputs that would otherwise fail deep inside torch."""
+    rgb, depth = np.asarray(rgb), np.asarray(depth)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+        raise PipelineInputError(f"rgb: expected (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
+    if depth.shape != rgb.shape[:2]:
+        raise PipelineInputError(f"depth: shape {depth.shape} differs from the image's {rgb.shape[:2]}")
+    if not np.issubdtype(depth.dtype, np.floating):
+        raise PipelineInputError(f"depth: expected float metres, got {depth.dtype} (divide millimetres by 1000)")
+    if (intrinsics.width, intrinsics.height) != (rgb.shape[1], rgb.shape[0]):
+        raise PipelineInputError(f"intrinsics are for {intrinsics.width}x{intrinsics.height}, the image is "
+                                 f"{rgb.shape[1]}x{rgb.shape[0]}")
+    valid = depth[np.isfinite(depth) & (depth > 0)]
+    if valid.size:
+        median = float(np.median(valid))
+        if not PLAUSIBLE_DEPTH_M[0] <= median <= PLAUSIBLE_DEPTH_M[1]:
+            raise PipelineInputError(f"depth: median {median:.3g} is not a plausible distance in metres "
+                                     f"(expected {PLAUSIBLE_DEPTH_M[0]}-{PLAUSIBLE_DEPTH_M[1]} m); wrong unit?")
+    pose = np.asarray(world_from_camera, dtype=float)
+    if pose.shape != (4, 4) or not np.allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-6):
+        raise PipelineInputError("world_from_camera: expected a 4 x 4 rigid transform")
+
+
+class PosePipeline:
+    """Detector + pose network. ``erode_px`` trims mask borders, whose depth mixes mushroom and
+    background at silhouette edges."""
+
+    def __init__(self, estimator: PoseEstimator, detector: Detector | None = None, erode_px: int = 1) -> None:
+        self.estimator = estimator
+        self.detector = detector
+        self.erode_px = erode_px
+
+    def __call__(self, rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, world_from_camera: np.ndarray,
+                 detections: list[Detection] | None = None) -> list[MushroomEstimate]:
+        """Estimates for every detection with enough valid points (others are left out: a
+        too-small or empty mask gives no estimate, never NaN). Pass ``detections`` to skip the
+        detector (e.g. oracle masks from ``detections_from_labels``)."""
+        check_inputs(rgb, depth, intrinsics, world_from_camera)
+        if detections is None:
+            if self.detector is None:
+                raise ValueError("no detector: pass detections, or build the pipeline with a detector")
+            detections = self.detector.detect(rgb)
+        world_from_camera = np.asarray(world_from_camera, dtype=float)
+        kernel = np.ones((2 * self.erode_px + 1,) * 2, np.uint8) if self.erode_px > 0 else None
+        clouds, colours, kept = [], [], []
+        for det in detections:
+            mask = det.mask if kernel is None else cv2.erode(det.mask.astype(np.uint8), kernel).astype(bool)
+            points, pixels = backproject(depth, intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, mask)
+            if len(points) < self.estimator.min_points:
+                continue
+            clouds.append(points)
+            colours.append(rgb[pixels[:, 0], pixels[:, 1]].astype(np.float32) / 255.0)
+            kept.append(det)
+        if not clouds:
+            return []
+        # Every cloud has enough points (checked above), so this raises no NoEstimate.
+        estimates = self.estimator.estimate_batch(clouds, colours if self.estimator.config.use_rgb else None)
+        rot, trans = world_from_camera[:3, :3], world_from_camera[:3, 3]
+        results = []
+        for det, points, est in zip(kept, clouds, estimates):
+            axis = est.rotation[:, 2]
+            top = est.centre + axis * float(np.max((points - est.centre) @ axis))
+            results.append(MushroomEstimate(
+                detection=det, rotation_cam=est.rotation, centre_cam=est.centre, cap_top_cam=top,
+                rotation_world=rot @ est.rotation, centre_world=rot @ est.centre + trans,
+                cap_top_world=rot @ top + trans, num_points=est.num_points,
+            ))
+        return results

@@ -1,0 +1,77 @@
+"""The ``"perception"`` pose source: the two-stage pipeline on the overhead camera's RGB-D.
+
+At reset the scene is rendered from its overhead camera (RGB, metric depth, instance labels),
+the detector's masks are cut out of the depth, and the pose network estimates each mushroom.
+With the default oracle detector the masks come from MuJoCo's segmentation render, so the pose
+network's error is what reaches the picker.
+
+If the target gets no estimate (hidden, or fewer points than the network needs) the source
+falls back to an upright stem through the target's cap top — a flagged outcome, counted in
+``fallbacks`` — rather than failing the episode before the robot moves.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+
+from sms3d_env.pose_source import PoseEstimate
+
+
+class PerceptionPose:
+    """Callable pose source ``(scene, instance_id, rng) -> PoseEstimate`` using ``PosePipeline``.
+
+    Args:
+        pipeline: a ``perception.pipeline.PosePipeline``; default: the shipped pose network.
+        part: which oracle masks feed the network, ``"cap"`` or ``"mushroom"`` (whole visible).
+    """
+
+    def __init__(self, pipeline: Any = None, part: Literal["cap", "mushroom"] = "cap") -> None:
+        if part not in ("cap", "mushroom"):
+            raise ValueError(f"part must be 'cap' or 'mushroom', got {part!r}")
+        self.pipeline = pipeline
+        self.part = part
+        self.fallbacks = 0
+        self.last_axis_error_deg: float | None = None
+        self._renderer: Any = None
+
+    def _pipeline(self) -> Any:
+        if self.pipeline is None:
+            from perception.estimator import PoseEstimator
+            from perception.pipeline import PosePipeline
+
+            self.pipeline = PosePipeline(PoseEstimator.from_pretrained())
+        return self.pipeline
+
+    def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:
+        from generator.dataset.render import SceneRenderer
+        from perception.detector import detections_from_labels
+
+        cam = scene.config.camera
+        if self._renderer is None or (self._renderer.height, self._renderer.width) != (cam.height, cam.width):
+            self.close()
+            self._renderer = SceneRenderer(cam.height, cam.width)
+        frame = self._renderer.render(scene, amodal=False)
+        labels = frame.labels_cap if self.part == "cap" else frame.labels_mushroom
+        detections = [d for d in detections_from_labels(labels) if d.instance_id == instance_id]
+        estimates = self._pipeline()(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, detections)
+        truth = scene.instances[instance_id]
+        if not estimates:
+            self.fallbacks += 1
+            self.last_axis_error_deg = float(np.degrees(np.arccos(np.clip(truth.stem_axis[2], -1, 1))))
+            return PoseEstimate(np.asarray(truth.cap_top, float).copy(), np.eye(3))
+        est = estimates[0]
+        cos = float(np.clip(est.stem_axis_world @ truth.stem_axis, -1.0, 1.0))
+        self.last_axis_error_deg = float(np.degrees(np.arccos(cos)))
+        return PoseEstimate(est.cap_top_world, est.rotation_world)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None  # GL contexts do not pickle; a copy renders with its own
+        return state

@@ -1,0 +1,82 @@
+import numpy as np
+import pytest
+
+from generator import SceneConfig, generate_scene
+from generator.camera import project
+from generator.dataset.render import SceneRenderer
+from perception.detector import detections_from_labels
+from perception.estimator import PoseEstimator
+from perception.pipeline import PipelineInputError, PosePipeline
+from perception.pose_net import PoseNet, PoseNetConfig
+
+
+@pytest.fixture(scope="module")
+def frame_and_scene():
+    config = SceneConfig().replace(placement__num_mushrooms=12, camera__width=320, camera__height=240)
+    scene = generate_scene(config, seed=4)
+    with SceneRenderer(240, 320) as renderer:
+        frame = renderer.render(scene, amodal=False)
+    return frame, scene
+
+
+@pytest.fixture(scope="module")
+def pipeline():
+    # A small untrained network: these tests check plumbing and frames, not accuracy.
+    net = PoseNet(PoseNetConfig(backbone="pointnet", num_points=128, hidden=16))
+    return PosePipeline(PoseEstimator(net))
+
+
+def test_oracle_detections_follow_labels(frame_and_scene):
+    frame, scene = frame_and_scene
+    detections = detections_from_labels(frame.labels_mushroom)
+    visible = {int(v) - 1 for v in np.unique(frame.labels_mushroom) if v}
+    assert {d.instance_id for d in detections} == visible
+    for d in detections:
+        x0, y0, x1, y1 = d.box
+        assert d.mask[y0:y1 + 1, x0:x1 + 1].sum() == d.area
+    with pytest.raises(ValueError, match="labels"):
+        detections_from_labels(np.zeros((4, 4), float))
+
+
+def test_one_estimate_per_visible_mushroom_and_frames_agree(frame_and_scene, pipeline):
+    frame, scene = frame_and_scene
+    detections = detections_from_labels(frame.labels_cap)
+    estimates = pipeline(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, detections)
+    big_enough = [d for d in detections if d.area >= 40]  # well above 16 points after erosion
+    assert len(estimates) >= len(big_enough) > 3
+    for est in estimates:
+        R = est.rotation_world
+        assert np.allclose(R.T @ R, np.eye(3), atol=1e-5) and np.isclose(np.linalg.det(R), 1, atol=1e-5)
+        assert np.all(np.isfinite(est.cap_top_world))
+        # The world-frame centre projects back onto the mushroom's own mask.
+        u, v, _ = project(est.centre_world[None], frame.world_from_camera, frame.intrinsics)[0]
+        window = est.detection.mask[int(round(v)) - 2:int(round(v)) + 3, int(round(u)) - 2:int(round(u)) + 3]
+        assert window.any()
+        # ... and lies near that mushroom's true cap (within a cap diameter).
+        truth = scene.instances[est.detection.instance_id]
+        assert np.linalg.norm(est.centre_world - truth.cap_obb.center) < truth.cap_diameter
+
+
+def test_no_detections_and_tiny_masks_give_no_estimates(frame_and_scene, pipeline):
+    frame, _ = frame_and_scene
+    assert pipeline(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, []) == []
+    tiny = np.zeros(frame.depth.shape, np.uint16)
+    tiny[10:13, 10:13] = 1
+    assert pipeline(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, detections_from_labels(tiny)) == []
+
+
+def test_bad_inputs_are_named(frame_and_scene, pipeline):
+    frame, _ = frame_and_scene
+    args = (frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, [])
+    with pytest.raises(PipelineInputError, match="rgb"):
+        pipeline(frame.rgb.astype(np.float32), *args[1:])
+    with pytest.raises(PipelineInputError, match="unit"):
+        pipeline(frame.rgb, frame.depth * 1000.0, *args[2:])
+    with pytest.raises(PipelineInputError, match="float"):
+        pipeline(frame.rgb, (frame.depth * 1000).astype(np.uint16), *args[2:])
+    with pytest.raises(PipelineInputError, match="intrinsics"):
+        pipeline(frame.rgb[:100], frame.depth[:100], *args[2:])
+    with pytest.raises(PipelineInputError, match="world_from_camera"):
+        pipeline(frame.rgb, frame.depth, frame.intrinsics, np.eye(3), [])
+    with pytest.raises(ValueError, match="detector"):
+        pipeline(*args[:4])
