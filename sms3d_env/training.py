@@ -408,3 +408,17 @@ def register(subparsers: Any) -> None:
     e.add_argument("--num-mushrooms", type=int, default=None, help="default: the training value")
     e.add_argument("--json", default=None, help="also write the result here")
     e.set_defaults(func=_cmd_eval)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sms3d_env.training {train-policy,eval-policy} ...`` (same as ``sms3d ...``)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m sms3d_env.training")
+    register(parser.add_subparsers(dest="cmd", required=True))
+    args = parser.parse_args(argv)
+    return int(args.func(args))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

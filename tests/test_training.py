@@ -129,3 +129,13 @@ def test_cli_registers_subcommands():
     assert (b.episodes, b.pose_error_deg) == (30, 30.0) and callable(b.func)
     bad = parser.parse_args(["train-policy", "--n-envs", "0"])
     assert bad.func(bad) == 2
+
+
+def test_module_main_eval_policy(ppo_run, tmp_path, capsys):
+    from sms3d_env.training import main
+
+    out = tmp_path / "res.json"
+    assert main(["eval-policy", "--model", str(ppo_run[0] / "model.zip"), "--episodes", "1",
+                 "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["episodes"] == 1
+    assert main(["eval-policy", "--model", str(tmp_path / "missing.zip")]) == 2
