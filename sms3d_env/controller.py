@@ -63,6 +63,7 @@ class IKController:
         self.model = arm_only_model(robot)
         self.configuration = mink.Configuration(self.model)
         self.site = PREFIX + TOOL_SITE
+        self.site_id = self.model.site(self.site).id
         self.arm_qadr = np.array([self.model.jnt_qposadr[self.model.joint(PREFIX + j).id]
                                   for j in ARM_JOINTS])
         self.frame_task = mink.FrameTask(self.site, "site", position_cost=cfg.position_cost,
@@ -92,8 +93,7 @@ class IKController:
     def tool_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Commanded tool site position and rotation matrix."""
         d = self.configuration.data
-        sid = self.model.site(self.site).id
-        return d.site_xpos[sid].copy(), d.site_xmat[sid].reshape(3, 3).copy()
+        return d.site_xpos[self.site_id].copy(), d.site_xmat[self.site_id].reshape(3, 3).copy()
 
     def solve_to(self, pos: np.ndarray, rot: np.ndarray, dt: float | None = None) -> np.ndarray:
         """One IK step toward a tool pose; returns the new commanded arm angles."""
@@ -107,8 +107,9 @@ class IKController:
 
     def step(self, twist: np.ndarray, q_measured: np.ndarray) -> np.ndarray:
         """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period."""
-        lead = np.clip(self.q_cmd - q_measured, -self.cfg.max_lead, self.cfg.max_lead)
-        if not np.allclose(lead, self.q_cmd - q_measured):
+        gap = self.q_cmd - q_measured
+        lead = np.clip(gap, -self.cfg.max_lead, self.cfg.max_lead)
+        if np.abs(lead - gap).max() > 1e-8:
             q = self.configuration.q.copy()
             q[self.arm_qadr] = q_measured + lead
             self.configuration.update(q)
