@@ -194,7 +194,7 @@ class SMS3DPickEnv(gym.Env):
         self._disown_renderers()
         m = spec.compile()
         d = mujoco.MjData(m)
-        terrain = m.geom("terrain").id
+        terrain = self.terrain_geom = m.geom("terrain").id
         m.geom_contype[terrain], m.geom_conaffinity[terrain] = ph.SOIL_CONTYPE, ph.SOIL_CONAFFINITY
         self.body_ids = np.array([m.body(f"mushroom_{i}").id for i in range(n)])
         self.dofadr = np.array([m.jnt_dofadr[m.joint(f"mushroom_{i}_joint").id] if i in free else -1
@@ -456,11 +456,33 @@ class SMS3DPickEnv(gym.Env):
             b = self.body_ids[k]
             if (m.body_conaffinity[b] != ph.LIFTED_CONAFFINITY
                     and self.data.xpos[b, 2] - self.init_xpos[k, 2] > ph.SOIL_CLEARANCE):
-                for g in (self.cap_geoms[k], self.stem_geoms[k]):
-                    m.geom_conaffinity[g] = ph.LIFTED_CONAFFINITY
-                m.body_conaffinity[b] = ph.LIFTED_CONAFFINITY
+                self._set_soil_contact(k, True)
+                # Only once the stem's collision hull is out of the soil: switching contacts on
+                # while it still penetrates (a sloped or tilted stem base) throws the mushroom
+                # out of the cup.
+                if self._penetrates_soil(k):
+                    self._set_soil_contact(k, False)
         lift = float(self.data.site_xpos[self.cap_top_sites[ep.target], 2] - self.init_cap_top[2])
         ep.max_lift = max(ep.max_lift, lift)
+
+    def _set_soil_contact(self, k: int, on: bool) -> None:
+        m = self.model
+        aff = ph.LIFTED_CONAFFINITY if on else ph.FREE_CONAFFINITY
+        for g in (self.cap_geoms[k], self.stem_geoms[k]):
+            m.geom_conaffinity[g] = aff
+        m.body_conaffinity[self.body_ids[k]] = aff
+
+    def _penetrates_soil(self, k: int) -> bool:
+        """Whether mushroom ``k`` penetrates the soil now (runs the collision detector; the
+        next physics step recomputes the contacts from scratch)."""
+        m, d = self.model, self.data
+        mujoco.mj_collision(m, d)
+        ncon = d.ncon
+        if ncon == 0:
+            return False
+        geoms = d.contact.geom[:ncon]
+        mine = (self.geom_mushroom[geoms] == k).any(axis=1) & (geoms == self.terrain_geom).any(axis=1)
+        return bool(np.any(d.contact.dist[:ncon][mine] < 0.0))
 
     # ------------------------------------------------------------------ outputs
     def _lift(self) -> float:
