@@ -3,8 +3,9 @@
 Usage: python examples/train_sac.py [--steps 20000] [--n-envs 1] [--pose-error-deg 0] [--out runs/sac]
 
 Time here (2 shared CPU cores, no GPU, alongside a PPO run): SAC does one gradient step per
-env step, so it is slower per step than PPO: about 23 env steps/s overall in a 90 s run with 1 env (1,000 random steps, then
-~13 steps/s once updates start), so the default 20k steps take roughly 25 minutes.
+env step, so it is slower per step than PPO: about 23 env steps/s overall in a 90 s run with
+1 env (1,000 random steps, then ~13 steps/s once updates start), so the default 20k steps take
+roughly 25 minutes.
 Each 30-episode evaluation adds about a minute or two.
 Logs: <out>/progress.csv (eval/success_rate), checkpoints, <out>/model.zip.
 """
