@@ -75,11 +75,16 @@ class NoisyPose:
 
 def make_pose_source(kind: str | PoseSource, pose_error_deg: float = 0.0,
                      position_std: float = 0.0) -> PoseSource:
-    """``"oracle"``, ``"noisy"`` or any callable pose source (e.g. a perception pipeline)."""
+    """``"oracle"``, ``"noisy"``, ``"perception"`` (the two-stage pipeline with the shipped pose
+    network, see ``perception_source.py``) or any callable pose source."""
     if callable(kind):
         return kind
     if kind == "oracle":
         return OraclePose()
     if kind == "noisy":
         return NoisyPose(pose_error_deg, position_std)
-    raise ValueError(f"pose_source must be 'oracle', 'noisy' or a callable, got {kind!r}")
+    if kind == "perception":
+        from sms3d_env.perception_source import PerceptionPose
+
+        return PerceptionPose()
+    raise ValueError(f"pose_source must be 'oracle', 'noisy', 'perception' or a callable, got {kind!r}")
