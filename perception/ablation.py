@@ -24,7 +24,7 @@ import torch
 
 from perception.data import PointCloudPoseDataset, PointCloudSample
 from perception.pose_net import PoseNet, PoseNetConfig
-from perception.synthetic_views import default_models, generate_samples
+from perception.synthetic_views import ViewConfig, default_models, generate_samples
 from perception.train import TrainConfig, evaluate, train
 
 
@@ -172,6 +172,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--base-points", type=int, default=1024)
     p.add_argument("--points", type=int, nargs="+", default=[64, 256, 1024])
     p.add_argument("--only", nargs="+", help="run only these studies (default, points, head, rgb, backbone)")
+    p.add_argument("--tilt-std-deg", type=float, default=20.0, help="σ of roll/pitch of the rendered views")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--device", default="cpu")
@@ -181,9 +182,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.only:
         variants = [v for v in variants if v.study in args.only]
     train_models = default_models(model_ids=(0, 1, 2, 3, 4, 5))
-    tr = generate_samples(args.num_train, args.seed * 1000 + 1, train_models)
-    va = generate_samples(args.num_val, args.seed * 1000 + 2, train_models)
-    te = generate_samples(args.num_test, args.seed * 1000 + 3, default_models())  # all models
+    views = ViewConfig(tilt_std_deg=args.tilt_std_deg)
+    tr = generate_samples(args.num_train, args.seed * 1000 + 1, train_models, views)
+    va = generate_samples(args.num_val, args.seed * 1000 + 2, train_models, views)
+    te = generate_samples(args.num_test, args.seed * 1000 + 3, default_models(), views)  # all models
     cfg = TrainConfig(epochs=args.epochs, lr=args.lr, loss=args.loss, seed=args.seed, device=args.device, progress=False)
     run_ablation(variants, tr, va, te, cfg, args.out)
     print((Path(args.out) / "ablation.md").read_text())
