@@ -1,6 +1,11 @@
 """Gymnasium environments for robotic mushroom picking (``SMS3DPick-v0``, ``SMS3DPickSparse-v0``)."""
 
-from gymnasium.envs.registration import register, registry
+import os
+
+# Headless rendering by default; set before anything imports mujoco (and picks a GL backend).
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from gymnasium.envs.registration import register, registry  # noqa: E402
 
 from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.physics import PickPhysicsParams

@@ -47,6 +47,7 @@ class SweepConfig:
     seed: int = 0
     num_mushrooms: int = 25
     variants: tuple[str, ...] = ("default",)
+    perception_episodes: int = 0  # episodes with the perception pose source (default physics)
     chunk: int = 10  # episodes per task (one part file)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
 
@@ -56,6 +57,8 @@ class SweepConfig:
             raise ValueError(f"errors_deg must be angles in [0, 180], got {self.errors_deg!r}")
         if not isinstance(self.episodes, int) or self.episodes < 1:
             raise ValueError(f"episodes must be an integer >= 1, got {self.episodes!r}")
+        if not isinstance(self.perception_episodes, int) or self.perception_episodes < 0:
+            raise ValueError(f"perception_episodes must be an integer >= 0, got {self.perception_episodes!r}")
         if not isinstance(self.chunk, int) or self.chunk < 1:
             raise ValueError(f"chunk must be an integer >= 1, got {self.chunk!r}")
         unknown = [v for v in self.variants if v not in SENSITIVITY_VARIANTS]
@@ -66,18 +69,26 @@ class SweepConfig:
 @dataclass(frozen=True)
 class Task:
     variant: str
-    error_deg: float
+    error_deg: float  # the noisy source's error; NaN for the perception source (measured instead)
     episode_seeds: tuple[int, ...]
+    source: str = "noisy"
 
     @property
     def name(self) -> str:
-        return f"{self.variant}_e{self.error_deg:g}_s{self.episode_seeds[0]}-{self.episode_seeds[-1]}"
+        error = "perception" if self.source == "perception" else f"e{self.error_deg:g}"
+        return f"{self.variant}_{error}_s{self.episode_seeds[0]}-{self.episode_seeds[-1]}"
+
+
+def _chunks(first: int, count: int, size: int) -> list[tuple[int, ...]]:
+    seeds = list(range(first, first + count))
+    return [tuple(seeds[i : i + size]) for i in range(0, len(seeds), size)]
 
 
 def plan_tasks(config: SweepConfig) -> list[Task]:
-    seeds = list(range(config.seed, config.seed + config.episodes))
-    chunks = [tuple(seeds[i : i + config.chunk]) for i in range(0, len(seeds), config.chunk)]
-    return [Task(v, e, c) for v in config.variants for e in config.errors_deg for c in chunks]
+    chunks = _chunks(config.seed, config.episodes, config.chunk)
+    tasks = [Task(v, e, c) for v in config.variants for e in config.errors_deg for c in chunks]
+    perception = _chunks(config.seed, config.perception_episodes, config.chunk)
+    return tasks + [Task("default", math.nan, c, "perception") for c in perception]
 
 
 def target_features(scene: Any, target: int) -> dict[str, float]:
@@ -97,18 +108,27 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     from sms3d_env.scripted_picker import ScriptedPicker, run_episode
 
     physics = PickPhysicsParams(**SENSITIVITY_VARIANTS[task.variant])
+    if task.source == "perception":
+        from sms3d_env.perception_source import PerceptionPose
+
+        source: Any = PerceptionPose()
+    else:
+        source = "noisy"
     env = gym.make(
         "SMS3DPick-v0",
         scene_config=SceneConfig().replace(placement__num_mushrooms=config.num_mushrooms),
-        pose_source="noisy", pose_error_deg=task.error_deg, physics=physics, **config.env_kwargs,
+        pose_source=source, pose_error_deg=0.0 if task.source == "perception" else task.error_deg,
+        physics=physics, **config.env_kwargs,
     )
     picker = ScriptedPicker.for_env(env)
     rows = []
     try:
         for seed in task.episode_seeds:
             result = run_episode(env, picker, seed)
+            axis_error = source.last_axis_error_deg if task.source == "perception" else task.error_deg
             rows.append({
-                "variant": task.variant, "error_deg": task.error_deg, **result,
+                "variant": task.variant, "source": task.source, "error_deg": task.error_deg,
+                "axis_error_deg": axis_error, **result,
                 **target_features(env.unwrapped.scene, result["target"]),
             })
     finally:
@@ -171,7 +191,7 @@ def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]
     """Success rate with its interval and failure-cause counts per (variant, error)."""
     groups: dict[tuple[str, float], list[dict[str, Any]]] = {}
     for r in rows:
-        if r["reachable"] and keep(r):
+        if r["reachable"] and r.get("source", "noisy") == "noisy" and keep(r):
             groups.setdefault((r["variant"], r["error_deg"]), []).append(r)
     table = []
     for (variant, error), group in sorted(groups.items()):
@@ -201,7 +221,7 @@ def tolerable_error(table: Sequence[dict[str, Any]], variant: str = "default", w
     return answer
 
 
-CSV_COLUMNS = ("variant", "error_deg", "seed", "target", "reachable", "success", "failure_cause",
+CSV_COLUMNS = ("variant", "source", "error_deg", "axis_error_deg", "seed", "target", "reachable", "success", "failure_cause",
                "tilt_deg", "cap_diameter", "nn_distance", "steps", "return", "neighbours_disturbed",
                "bruised", "target_detached")
 
@@ -215,6 +235,20 @@ def write_csv(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
     writer.writeheader()
     writer.writerows(rows)
     _write_atomic(Path(path), buffer.getvalue())
+
+
+def perception_point(rows: Sequence[dict[str, Any]]) -> dict[str, float] | None:
+    """Success of the perception pose source with its measured stem-axis error (mean, median,
+    90th percentile), or None if the sweep ran no perception episodes."""
+    runs = [r for r in rows if r.get("source") == "perception" and r["reachable"]]
+    if not runs:
+        return None
+    errors = np.array([r["axis_error_deg"] for r in runs], dtype=float)
+    wins = sum(r["success"] for r in runs)
+    lo, hi = wilson_interval(wins, len(runs))
+    return {"error_deg": float(errors.mean()), "median_error_deg": float(np.median(errors)),
+            "p90_error_deg": float(np.percentile(errors, 90)), "success": wins / len(runs),
+            "ci_low": lo, "ci_high": hi, "n": len(runs)}
 
 
 def crowded_threshold(rows: Sequence[dict[str, Any]]) -> float:
@@ -244,8 +278,13 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
         top.axvline(err, ls=":", color="grey")
         top.text(err, 2, f" {label}\n {err}°", fontsize=7, color="grey", rotation=90, va="bottom")
     if perception:
-        top.errorbar([perception["error_deg"]], [100 * perception["success"]], fmt="*", ms=14, color="k",
-                     label="perception pose source")
+        top.errorbar([perception["error_deg"]], [100 * perception["success"]],
+                     xerr=[[max(0.0, perception["error_deg"] - perception["median_error_deg"])],
+                           [max(0.0, perception["p90_error_deg"] - perception["error_deg"])]],
+                     yerr=[[100 * (perception["success"] - perception["ci_low"])],
+                           [100 * (perception["ci_high"] - perception["success"])]],
+                     fmt="*", ms=14, color="k", capsize=3,
+                     label="perception source (mean axis error; median-p90)")
     top.set_ylabel("pick success (%)")
     top.set_ylim(0, 105)
     top.grid(alpha=0.3)
@@ -310,14 +349,16 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
             verdict = "within" if err <= tol else "beyond"
             lines.append(f"- {label}: {err}° — {verdict} the tolerable {tol:g}°.")
     if perception:
-        lines += ["", f"Perception pose source: mean stem-axis error {perception['error_deg']:.2f}°, "
-                      f"success {100 * perception['success']:.1f} % over {perception['n']} episodes."]
+        lines += ["", f"Perception pose source (oracle masks + shipped pose network): stem-axis error mean "
+                      f"{perception['error_deg']:.1f}°, median {perception['median_error_deg']:.1f}°, 90th percentile "
+                      f"{perception['p90_error_deg']:.1f}°; success {100 * perception['success']:.1f} % "
+                      f"({100 * perception['ci_low']:.1f}–{100 * perception['ci_high']:.1f} %) over {perception['n']} episodes."]
     return "\n".join(lines) + "\n"
 
 
-def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str = "",
-                 perception: dict[str, float] | None = None) -> dict[str, Path]:
+def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str = "") -> dict[str, Path]:
     """CSV, PNG and Markdown summary into ``out``; returns their paths."""
+    perception = perception_point(rows)
     out = Path(out)
     paths = {"csv": out / "sweep.csv", "png": out / "sweep.png", "md": out / "summary.md"}
     write_csv(rows, paths["csv"])
@@ -333,6 +374,7 @@ def _cmd_sweep(args: Any) -> int:
     config = SweepConfig(
         errors_deg=tuple(args.errors), episodes=args.episodes, seed=args.seed,
         num_mushrooms=args.num_mushrooms, variants=tuple(args.variants), chunk=args.chunk,
+        perception_episodes=args.perception_episodes,
     )
     rows = run_sweep(config, args.out, workers=args.workers)
     command = "sms3d " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["sweep"] else ""
@@ -352,6 +394,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--num-mushrooms", type=int, default=25)
     p.add_argument("--variants", nargs="+", default=["default"], choices=sorted(SENSITIVITY_VARIANTS),
                    help="physics settings to compare (sensitivity to unsourced assumptions)")
+    p.add_argument("--perception-episodes", type=int, default=0,
+                   help="also run this many episodes with the perception pose source (shipped network)")
     p.add_argument("--chunk", type=int, default=10, help="episodes per resumable task")
     p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 1)), help="processes")
     p.set_defaults(func=_cmd_sweep)

@@ -24,10 +24,11 @@ class PerceptionPose:
 
     Args:
         pipeline: a ``perception.pipeline.PosePipeline``; default: the shipped pose network.
-        part: which oracle masks feed the network, ``"cap"`` or ``"mushroom"`` (whole visible).
+        part: which oracle masks feed the network, ``"mushroom"`` (whole visible mushroom, what
+            the shipped network was trained on) or ``"cap"``.
     """
 
-    def __init__(self, pipeline: Any = None, part: Literal["cap", "mushroom"] = "cap") -> None:
+    def __init__(self, pipeline: Any = None, part: Literal["cap", "mushroom"] = "mushroom") -> None:
         if part not in ("cap", "mushroom"):
             raise ValueError(f"part must be 'cap' or 'mushroom', got {part!r}")
         self.pipeline = pipeline

@@ -50,26 +50,32 @@ def test_config_validation():
 
 
 def test_small_sweep_resumes_and_reports(tmp_path):
-    config = SweepConfig(errors_deg=(0.0, 30.0), episodes=2, chunk=1, num_mushrooms=8)
+    config = SweepConfig(errors_deg=(0.0, 30.0), episodes=2, chunk=1, num_mushrooms=8, perception_episodes=1)
     rows = run_sweep(config, tmp_path, progress=False)
-    assert len(rows) == 4
+    perception = [r for r in rows if r["source"] == "perception"]
+    rows = [r for r in rows if r["source"] == "noisy"]
+    assert len(rows) == 4 and len(perception) == 1
     assert {r["error_deg"] for r in rows} == {0.0, 30.0}
+    # The perception source's stem-axis error is measured, not set: finite and below chance.
+    assert 0.0 <= perception[0]["axis_error_deg"] < 90.0
     # Paired design: the same seeds pick the same scenes and targets at every error.
     by_seed = {}
     for r in rows:
         by_seed.setdefault(r["seed"], set()).add(r["target"])
     assert all(len(t) == 1 for t in by_seed.values())
     parts = sorted((tmp_path / "parts").glob("*.json"))
-    assert len(parts) == 4
+    assert len(parts) == 5
     # A lost part is redone, the others are read back, and the numbers are the same.
     removed = parts[1]
     before = removed.read_text()
     removed.unlink()
     again = run_sweep(config, tmp_path, progress=False)
     assert removed.read_text() == before
+    again = [r for r in again if r["source"] == "noisy"]
     assert json.dumps(again, sort_keys=True) == json.dumps(rows, sort_keys=True)
-    paths = write_report(rows, tmp_path, "sms3d sweep ...")
+    paths = write_report(rows + perception, tmp_path, "sms3d sweep ...")
     with open(paths["csv"]) as fh:
         assert len(list(csv.DictReader(fh))) == 4
     assert paths["png"].stat().st_size > 10_000
     assert "tolerable error" in paths["md"].read_text()
+    assert "Perception pose source" in paths["md"].read_text()
