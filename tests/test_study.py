@@ -75,7 +75,7 @@ def test_small_sweep_resumes_and_reports(tmp_path):
     assert json.dumps(again, sort_keys=True) == json.dumps(rows, sort_keys=True)
     paths = write_report(rows + perception, tmp_path, "sms3d sweep ...")
     with open(paths["csv"]) as fh:
-        assert len(list(csv.DictReader(fh))) == 4
+        assert len(list(csv.DictReader(fh))) == 5
     assert paths["png"].stat().st_size > 10_000
     assert "tolerable error" in paths["md"].read_text()
     assert "Perception pose source" in paths["md"].read_text()
