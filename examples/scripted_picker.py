@@ -6,15 +6,11 @@ Usage: python examples/scripted_picker.py [--seed 0] [--pose-error-deg 0] [--out
 from __future__ import annotations
 
 import argparse
-import os
 
-os.environ.setdefault("MUJOCO_GL", "egl")
+import gymnasium as gym
 
-import cv2  # noqa: E402
-import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
-
-import sms3d_env  # noqa: E402
+import sms3d_env
+from sms3d_env.demo import picker_strip, save_rgb
 
 
 def main() -> None:
@@ -26,18 +22,9 @@ def main() -> None:
     args = ap.parse_args()
     env = gym.make("SMS3DPick-v0", pose_source="noisy", pose_error_deg=args.pose_error_deg,
                    render_mode="rgb_array", camera="side", render_size=(240, 320))
-    policy = sms3d_env.ScriptedPicker.for_env(env)
-    obs, info = env.reset(seed=args.seed)
-    frames = [env.render()]
-    done = False
-    while not done:
-        obs, _, term, trunc, info = env.step(policy(obs))
-        done = term or trunc
-        frames.append(env.render())
-    idx = np.linspace(0, len(frames) - 1, args.frames).round().astype(int)
-    strip = np.concatenate([frames[i] for i in idx], axis=1)
-    cv2.imwrite(args.out, cv2.cvtColor(strip, cv2.COLOR_RGB2BGR))
-    print(f"success={info['is_success']} cause={info['failure_cause']} steps={len(frames) - 1} -> {args.out}")
+    strip, info = picker_strip(env, sms3d_env.ScriptedPicker.for_env(env), args.seed, args.frames)
+    save_rgb(args.out, strip)
+    print(f"success={info['is_success']} cause={info['failure_cause']} -> {args.out}")
     env.close()
 
 
