@@ -188,7 +188,7 @@ class SMS3DPickEnv(gym.Env):
             spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
                               objtype=mujoco.mjtObj.mjOBJ_BODY, name1=PREFIX + CUP_BODY,
                               name2=f"mushroom_{i}", active=False)
-        spec.worldbody.add_camera(name="side", pos=[0.0, -0.75, 0.45],
+        spec.worldbody.add_camera(name="side", pos=[0.0, -0.42, 0.28],
                                   xyaxes=[1, 0, 0, 0, 0.6, 0.8], fovy=50)
         spec.option.timestep = self.control_dt / self.substeps
         self._disown_renderers()
