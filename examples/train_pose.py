@@ -1,6 +1,8 @@
 """Train the mushroom pose network on rendered single-mushroom views, then use it.
 
     python examples/train_pose.py --out runs/pose_quick            # a few minutes on a CPU
+    # (this quick size barely beats the "always upright" prior, ~25° stem-axis error; the
+    #  shipped weights' 30-minute recipe is in perception/weights/README.md)
     python examples/train_pose.py --out runs/pose --num-train 4000 --epochs 50 --num-points 1024
 
 Renders views of the generator's mushroom models (held-out model 6 of each species is kept for

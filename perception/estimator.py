@@ -3,6 +3,11 @@
 ``PoseEstimator.estimate`` raises :class:`~perception.errors.NoEstimate` when fewer than
 ``min_points`` finite points remain (empty masks, NaN depth); ``estimate_or_none`` returns
 ``None`` instead. It never returns NaN.
+
+Clouds larger than the network's ``num_points`` are subsampled: with ``sampling="random"`` (the
+default, fast) each call draws from the estimator's seeded generator, so repeated calls on the
+same cloud can differ slightly; ``sampling="fps"`` is deterministic and order independent but
+costs a farthest-point-sampling pass per cloud.
 """
 
 from __future__ import annotations
