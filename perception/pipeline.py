@@ -9,9 +9,9 @@ import cv2
 import numpy as np
 
 from generator.camera import Intrinsics
-from generator.dataset.backproject import backproject
 from perception.detector import Detection, Detector
 from perception.estimator import PoseEstimator
+from perception.pointcloud import depth_to_points
 
 # Planar depth of a bed seen from 7 cm to 2 m: a median outside this range is the wrong unit.
 PLAUSIBLE_DEPTH_M = (0.05, 3.0)
@@ -90,11 +90,11 @@ class PosePipeline:
         clouds, colours, kept = [], [], []
         for det in detections:
             mask = det.mask if kernel is None else cv2.erode(det.mask.astype(np.uint8), kernel).astype(bool)
-            points, pixels = backproject(depth, intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, mask)
+            points, colors = depth_to_points(depth, intrinsics, mask, rgb)
             if len(points) < self.estimator.min_points:
                 continue
-            clouds.append(points)
-            colours.append(rgb[pixels[:, 0], pixels[:, 1]].astype(np.float32) / 255.0)
+            clouds.append(points.astype(np.float64))
+            colours.append(colors)
             kept.append(det)
         if not clouds:
             return []

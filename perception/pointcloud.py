@@ -13,6 +13,7 @@ from typing import Literal
 import numpy as np
 import torch
 
+from generator.dataset.backproject import backproject
 from perception.errors import NoEstimate, PerceptionConfigError
 
 #: Fewest valid points from which a pose is estimated; fewer gives :class:`NoEstimate`.
@@ -54,7 +55,8 @@ def depth_to_points(
 
     Args:
         depth: ``(H, W)`` metric depth (m); ``<= 0``, NaN and inf are invalid.
-        intrinsics: pinhole intrinsics of the depth image.
+        intrinsics: pinhole intrinsics of the depth image (anything with fx, fy, cx, cy, e.g.
+            this module's ``Intrinsics`` or ``generator.camera.Intrinsics``).
         mask: optional ``(H, W)`` boolean instance mask; all pixels when ``None``.
         rgb: optional ``(H, W, 3)`` image (uint8 or float in [0, 1]).
 
@@ -62,19 +64,11 @@ def depth_to_points(
         ``(points (N, 3) float32, colors (N, 3) float32 in [0, 1] or None)``; ``N`` may be 0.
     """
     depth = np.asarray(depth)
-    if depth.ndim != 2:
-        raise ValueError(f"depth: expected shape (H, W), got {depth.shape}")
-    valid = np.isfinite(depth) & (depth > 0)
-    if mask is not None:
-        mask = np.asarray(mask)
-        if mask.shape != depth.shape:
-            raise ValueError(f"mask: shape {mask.shape} differs from depth shape {depth.shape}")
-        valid &= mask.astype(bool)
-    v, u = np.nonzero(valid)
-    z = depth[v, u].astype(np.float64)
-    x = (u - intrinsics.cx) * z / intrinsics.fx
-    y = (v - intrinsics.cy) * z / intrinsics.fy
-    points = np.stack((x, y, z), axis=-1).astype(np.float32)
+    # The project's one back-projection (generator's, so datasets and perception agree).
+    points, pixels = backproject(depth, intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy,
+                                 None if mask is None else np.asarray(mask))
+    points = points.astype(np.float32)
+    v, u = pixels[:, 0], pixels[:, 1]
     colors = None
     if rgb is not None:
         rgb = np.asarray(rgb)
