@@ -290,7 +290,8 @@ def evaluate_policy_success(model_path: str | Path, episodes: int = 30, pose_err
     pose error. Scene size and episode limit come from the model's ``config.json`` unless given.
 
     Returns ``{"episodes", "successes", "success_rate", "ci95": (lo, hi), "reachable",
-    "success_rate_reachable", "failure_causes": {cause: count}, "mean_return", "mean_steps",
+    "success_rate_reachable", "failure_causes": {cause: count}, "target_detached_at_end",
+    "target_held_at_end" (episode counts), "mean_return", "mean_steps",
     "pose_error_deg", "seed", "model"}``.
     """
     from sms3d_env.accuracy_study import wilson_interval
@@ -316,7 +317,7 @@ def evaluate_policy_success(model_path: str | Path, episodes: int = 30, pose_err
     torch.set_num_threads(1)  # per-step inference of a small MLP: more threads only add overhead
     env = _make_env(**kw)
     causes: Counter[str] = Counter()
-    successes = reachable = reach_succ = 0
+    successes = reachable = reach_succ = detached = held = 0
     returns, lengths = [], []
     try:
         for i in range(episodes):
@@ -332,6 +333,8 @@ def evaluate_policy_success(model_path: str | Path, episodes: int = 30, pose_err
             successes += ok
             reachable += bool(info["reachable"])
             reach_succ += ok and bool(info["reachable"])
+            detached += bool(info["target_detached"])
+            held += bool(info["gripped_target"])
             if not ok:
                 causes[str(info["failure_cause"])] += 1
             returns.append(total)
@@ -344,7 +347,8 @@ def evaluate_policy_success(model_path: str | Path, episodes: int = 30, pose_err
         "model": str(path), "episodes": episodes, "successes": successes,
         "success_rate": successes / episodes, "ci95": (lo, hi), "reachable": reachable,
         "success_rate_reachable": reach_succ / reachable if reachable else math.nan,
-        "failure_causes": dict(sorted(causes.items())), "mean_return": float(np.mean(returns)),
+        "failure_causes": dict(sorted(causes.items())),
+        "target_detached_at_end": detached, "target_held_at_end": held, "mean_return": float(np.mean(returns)),
         "mean_steps": float(np.mean(lengths)), "pose_error_deg": float(pose_error_deg), "seed": seed,
     }
 

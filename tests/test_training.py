@@ -34,6 +34,7 @@ def _check_eval(model_path) -> None:
     assert 0.0 <= lo <= res["success_rate"] <= hi <= 1.0
     assert res["episodes"] == 2
     assert res["successes"] + sum(res["failure_causes"].values()) == 2
+    assert 0 <= res["target_held_at_end"] <= res["episodes"]
     assert math.isfinite(res["mean_return"])
 
 
