@@ -16,6 +16,7 @@ SUBCOMMAND_MODULES = (
     "generator.dataset.cli",
     "perception.cli_pose",
     "sms3d_env.accuracy_study",
+    "sms3d_env.training",
     "sms3d_env.demo",
 )
 

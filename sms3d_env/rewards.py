@@ -27,15 +27,18 @@ def compute_reward(s: RewardState, reward_type: str) -> float:
     """Sparse: 0 on success, -1 otherwise (Gymnasium-Robotics convention).
 
     Dense: -distance to the estimated cap top (m) + 0.1 x alignment of the cup axis with the
-    estimated stem axis + 0.5 sealed on the target + 1 detached + 2 x lift fraction + 5 success
-    - 2 bruise.
+    estimated stem axis + 0.5 sealed on the target + 1 detached *and held* + 2 x lift fraction
+    while held + 5 success - 2 bruise. The detach and lift terms pay only while the cup holds the
+    target: paid for detachment alone, PPO learned to knock targets off their roots and collect
+    the bonus every step without ever holding one.
     """
     if reward_type == "sparse":
         return 0.0 if s.success else -1.0
     dist = float(np.linalg.norm(s.tool_pos - s.est_cap_top))
     align = float(-s.tool_axis @ s.est_axis)
     r = -dist + 0.1 * align
-    r += 0.5 * s.gripped_target + 1.0 * s.target_detached
-    r += 2.0 * float(np.clip(s.lift / s.lift_goal, 0.0, 1.0)) * s.gripped_target
+    held = s.gripped_target
+    r += 0.5 * held + 1.0 * (s.target_detached and held)
+    r += 2.0 * float(np.clip(s.lift / s.lift_goal, 0.0, 1.0)) * held
     r += 5.0 * s.success - 2.0 * s.bruised
     return r
