@@ -28,13 +28,16 @@ TILTED_DEG = 30.0  # "tilted" mushrooms in the summary
 WITHIN_PP = 5.0  # success within this many percentage points of the oracle counts as "enough"
 PAPER_ERRORS_DEG = {"SMS3D synthetic (Point Transformer)": 1.67, "SMS3D real (M18K)": 3.68}
 
-# Physics settings with no published source, varied to show how the answer depends on them.
+# Physics settings with no published source, varied to show how the answer depends on them:
+# the seal angle, and the root's bending and twisting strength halved and doubled (relative to
+# the defaults, so the variants follow any change of them).
+_DEFAULTS = PickPhysicsParams()
 SENSITIVITY_VARIANTS: dict[str, dict[str, float]] = {
     "default": {},
-    "tight_seal": {"seal_angle_deg": 10.0},
-    "loose_seal": {"seal_angle_deg": 30.0},
-    "strong_root": {"bend_moment": 0.04, "twist_torque": 0.012},
-    "weak_root": {"bend_moment": 0.01, "twist_torque": 0.003},
+    "tight_seal": {"seal_angle_deg": _DEFAULTS.seal_angle_deg / 2},
+    "loose_seal": {"seal_angle_deg": _DEFAULTS.seal_angle_deg * 1.5},
+    "strong_root": {"bend_moment": 2 * _DEFAULTS.bend_moment, "twist_torque": 2 * _DEFAULTS.twist_torque},
+    "weak_root": {"bend_moment": _DEFAULTS.bend_moment / 2, "twist_torque": _DEFAULTS.twist_torque / 2},
 }
 
 
