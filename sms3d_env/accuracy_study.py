@@ -242,7 +242,7 @@ def write_csv(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
 
 def perception_point(rows: Sequence[dict[str, Any]]) -> dict[str, float] | None:
     """Success of the perception pose source with its measured stem-axis error (mean, median,
-    90th percentile), or None if the sweep ran no perception episodes."""
+    10th and 90th percentiles), or None if the sweep ran no perception episodes."""
     runs = [r for r in rows if r.get("source") == "perception" and r["reachable"]]
     if not runs:
         return None
@@ -250,7 +250,8 @@ def perception_point(rows: Sequence[dict[str, Any]]) -> dict[str, float] | None:
     wins = sum(r["success"] for r in runs)
     lo, hi = wilson_interval(wins, len(runs))
     return {"error_deg": float(errors.mean()), "median_error_deg": float(np.median(errors)),
-            "p90_error_deg": float(np.percentile(errors, 90)), "success": wins / len(runs),
+            "p10_error_deg": float(np.percentile(errors, 10)), "p90_error_deg": float(np.percentile(errors, 90)),
+            "success": wins / len(runs),
             "ci_low": lo, "ci_high": hi, "n": len(runs)}
 
 
@@ -279,15 +280,15 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
         top.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=variant, lw=2 if variant == "default" else 1)
     for label, err in PAPER_ERRORS_DEG.items():
         top.axvline(err, ls=":", color="grey")
-        top.text(err, 2, f" {label}\n {err}°", fontsize=7, color="grey", rotation=90, va="bottom")
+        top.text(err, 30, f" {label}: {err}°", fontsize=7, color="grey", rotation=90, va="bottom")
     if perception:
         top.errorbar([perception["error_deg"]], [100 * perception["success"]],
-                     xerr=[[max(0.0, perception["error_deg"] - perception["median_error_deg"])],
-                           [max(0.0, perception["p90_error_deg"] - perception["error_deg"])]],
+                     xerr=[[perception["error_deg"] - perception["p10_error_deg"]],
+                           [perception["p90_error_deg"] - perception["error_deg"]]],
                      yerr=[[100 * (perception["success"] - perception["ci_low"])],
                            [100 * (perception["ci_high"] - perception["success"])]],
                      fmt="*", ms=14, color="k", capsize=3,
-                     label="perception source (mean axis error; median-p90)")
+                     label="perception source (mean axis error; bar: 10th-90th percentile)")
     top.set_ylabel("pick success (%)")
     top.set_ylim(0, 105)
     top.grid(alpha=0.3)
