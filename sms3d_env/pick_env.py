@@ -65,8 +65,8 @@ class SMS3DPickEnv(gym.Env):
         render_mode: ``"rgb_array"`` or ``"depth_array"`` (metric depth in metres).
         scene_config: ``generator.SceneConfig`` for a new seeded scene per reset (default: 25
             mushrooms). Ignored when ``scenes`` is given.
-        scenes: a fixed list of ``generator.Scene`` objects; one is drawn per reset
-            (``options={"scene": k}`` picks one).
+        scenes: a fixed list of ``generator.Scene`` objects, or the folder of a ``sms3d generate``
+            dataset; one is drawn per reset (``options={"scene": k}`` picks one).
         pose_source: ``"oracle"``, ``"noisy"`` or a callable ``(scene, id, rng) -> PoseEstimate``.
         pose_error_deg, position_noise: the ``"noisy"`` source's rotation error (deg) and
             position noise standard deviation (m).
@@ -122,6 +122,12 @@ class SMS3DPickEnv(gym.Env):
             raise ValueError("scenes must be a non-empty sequence")
         self.render_mode = render_mode
         self.scene_config = scene_config
+        if isinstance(scenes, (str, os.PathLike)):
+            from generator.dataset.readers import load_scenes
+
+            scenes = load_scenes(scenes)
+            if not scenes:
+                raise ValueError("scenes: the dataset folder holds no complete scene")
         self.scenes = list(scenes) if scenes is not None else None
         self.pose_source = make_pose_source(pose_source, pose_error_deg, position_noise)
         self.target_rule, self.target_index = target_rule, target_index

@@ -227,3 +227,9 @@ def load_scene(root: str | Path, index: int) -> Scene:
         return Scene.load(path)
     except SceneFormatError as exc:
         raise CorruptFileError(path, str(exc)) from exc
+
+
+def load_scenes(root: str | Path, split: str | None = None) -> list[Scene]:
+    """Every complete scene of a dataset (or of one split), in index order."""
+    root = Path(root)
+    return [load_scene(root, i) for i in _scene_indices(root, split)]

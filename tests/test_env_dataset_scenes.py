@@ -1,0 +1,24 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import sms3d_env  # noqa: F401
+from generator.cli import main as sms3d
+from generator.dataset.readers import load_scenes
+
+
+def test_env_reads_scenes_from_a_dataset_folder(tmp_path):
+    out = tmp_path / "beds"
+    assert sms3d(["generate", "--out", str(out), "--num-scenes", "2", "--num-mushrooms", "6",
+                  "--workers", "1", "--seed", "3"]) == 0
+    scenes = load_scenes(out)
+    assert len(scenes) == 2
+    env = gym.make("SMS3DPick-v0", scenes=str(out))
+    env.reset(seed=0, options={"scene": 1})
+    assert env.unwrapped.scene.to_json() == scenes[1].to_json()
+    obs, *_ = env.step(np.zeros(env.action_space.shape, np.float32))
+    assert all(np.all(np.isfinite(v)) for v in obs.values())
+    env.close()
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(Exception, match="manifest"):
+        gym.make("SMS3DPick-v0", scenes=str(tmp_path / "empty"))
