@@ -13,7 +13,6 @@ import dataclasses
 import json
 import math
 import os
-from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,12 +21,9 @@ from typing import Any
 import numpy as np
 
 from sms3d_env.physics import PickPhysicsParams
+from sms3d_env.study_report import write_atomic, write_report
 
 DEFAULT_ERRORS_DEG = (0.0, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0)
-TILTED_DEG = 30.0  # "tilted" mushrooms in the summary
-WITHIN_PP = 5.0  # success within this many percentage points of the oracle counts as "enough"
-PAPER_ERRORS_DEG = {"SMS3D synthetic (Point Transformer)": 1.67, "SMS3D real (M18K)": 3.68}
-
 # Physics settings with no published source, varied to show how the answer depends on them:
 # the seal angle, and the root's bending and twisting strength halved and doubled (relative to
 # the defaults, so the variants follow any change of them).
@@ -139,15 +135,9 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     return rows
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
-
-
 def _run_and_save(task: Task, config: SweepConfig, parts: Path) -> str:
     rows = run_task(task, config)
-    _write_atomic(parts / f"{task.name}.json", json.dumps(rows, sort_keys=True))
+    write_atomic(parts / f"{task.name}.json", json.dumps(rows, sort_keys=True))
     return task.name
 
 
@@ -158,7 +148,7 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
     out = Path(out)
     parts = out / "parts"
     parts.mkdir(parents=True, exist_ok=True)
-    _write_atomic(out / "sweep_config.json", json.dumps(dataclasses.asdict(config), sort_keys=True, default=str))
+    write_atomic(out / "sweep_config.json", json.dumps(dataclasses.asdict(config), sort_keys=True, default=str))
     tasks = plan_tasks(config)
     todo = [t for t in tasks if not (parts / f"{t.name}.json").exists()]
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="sweep tasks", disable=not progress)
@@ -177,198 +167,6 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
     for task in tasks:
         rows.extend(json.loads((parts / f"{task.name}.json").read_text(encoding="utf-8")))
     return rows
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95 % Wilson score interval for a binomial proportion."""
-    if n == 0:
-        return (math.nan, math.nan)
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
-
-
-def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]], bool] = lambda r: True) -> list[dict[str, Any]]:
-    """Success rate with its interval and failure-cause counts per (variant, error)."""
-    groups: dict[tuple[str, float], list[dict[str, Any]]] = {}
-    for r in rows:
-        if r["reachable"] and r.get("source", "noisy") == "noisy" and keep(r):
-            groups.setdefault((r["variant"], r["error_deg"]), []).append(r)
-    table = []
-    for (variant, error), group in sorted(groups.items()):
-        wins = sum(r["success"] for r in group)
-        lo, hi = wilson_interval(wins, len(group))
-        causes: dict[str, int] = {}
-        for r in group:
-            if not r["success"]:
-                causes[r["failure_cause"] or "unknown"] = causes.get(r["failure_cause"] or "unknown", 0) + 1
-        table.append({"variant": variant, "error_deg": error, "n": len(group), "success": wins / len(group),
-                      "ci_low": lo, "ci_high": hi, "causes": causes})
-    return table
-
-
-def tolerable_error(table: Sequence[dict[str, Any]], variant: str = "default", within_pp: float = WITHIN_PP) -> float | None:
-    """Largest error whose success, and that of every smaller error, stays within ``within_pp``
-    percentage points of the zero-error (oracle) success; None without a zero-error row."""
-    rows = sorted((r for r in table if r["variant"] == variant), key=lambda r: r["error_deg"])
-    if not rows or rows[0]["error_deg"] != 0.0:
-        return None
-    oracle = rows[0]["success"]
-    answer = 0.0
-    for r in rows:
-        if oracle - r["success"] > within_pp / 100.0 + 1e-9:  # "within" includes exactly 5 points
-            break
-        answer = r["error_deg"]
-    return answer
-
-
-CSV_COLUMNS = ("variant", "source", "error_deg", "axis_error_deg", "seed", "target", "reachable", "success", "failure_cause",
-               "tilt_deg", "cap_diameter", "nn_distance", "steps", "return", "neighbours_disturbed",
-               "bruised", "target_detached")
-
-
-def write_csv(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
-    import csv
-    import io
-
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    _write_atomic(Path(path), buffer.getvalue())
-
-
-def perception_point(rows: Sequence[dict[str, Any]]) -> dict[str, float] | None:
-    """Success of the perception pose source with its measured stem-axis error (mean, median,
-    10th and 90th percentiles), or None if the sweep ran no perception episodes."""
-    runs = [r for r in rows if r.get("source") == "perception" and r["reachable"]]
-    if not runs:
-        return None
-    errors = np.array([r["axis_error_deg"] for r in runs], dtype=float)
-    wins = sum(r["success"] for r in runs)
-    lo, hi = wilson_interval(wins, len(runs))
-    return {"error_deg": float(errors.mean()), "median_error_deg": float(np.median(errors)),
-            "p10_error_deg": float(np.percentile(errors, 10)), "p90_error_deg": float(np.percentile(errors, 90)),
-            "success": wins / len(runs),
-            "ci_low": lo, "ci_high": hi, "n": len(runs)}
-
-
-def crowded_threshold(rows: Sequence[dict[str, Any]]) -> float:
-    """Nearest-neighbour distance below which a target counts as crowded: the lowest quartile."""
-    distances = [r["nn_distance"] for r in rows if math.isfinite(r["nn_distance"])]
-    return float(np.percentile(distances, 25)) if distances else math.inf
-
-
-def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dict[str, float] | None = None) -> None:
-    """Success vs pose error with 95 % intervals (one line per physics variant) above the
-    failure causes of the default physics, stacked."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    table = success_table(rows)
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 7.5), sharex=True, height_ratios=[3, 2])
-    for variant in dict.fromkeys(r["variant"] for r in table):
-        sub = [r for r in table if r["variant"] == variant]
-        x = [r["error_deg"] for r in sub]
-        y = [100 * r["success"] for r in sub]
-        lo = [100 * (r["success"] - r["ci_low"]) for r in sub]
-        hi = [100 * (r["ci_high"] - r["success"]) for r in sub]
-        top.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=variant, lw=2 if variant == "default" else 1)
-    for label, err in PAPER_ERRORS_DEG.items():
-        top.axvline(err, ls=":", color="grey")
-        top.text(err, 30, f" {label}: {err}°", fontsize=7, color="grey", rotation=90, va="bottom")
-    if perception:
-        top.errorbar([perception["error_deg"]], [100 * perception["success"]],
-                     xerr=[[perception["error_deg"] - perception["p10_error_deg"]],
-                           [perception["p90_error_deg"] - perception["error_deg"]]],
-                     yerr=[[100 * (perception["success"] - perception["ci_low"])],
-                           [100 * (perception["ci_high"] - perception["success"])]],
-                     fmt="*", ms=14, color="k", capsize=3,
-                     label="perception source (mean axis error; bar: 10th-90th percentile)")
-    top.set_ylabel("pick success (%)")
-    top.set_ylim(0, 105)
-    top.grid(alpha=0.3)
-    top.legend(fontsize=8, loc="lower left")
-    top.set_title("Scripted suction picker: success vs orientation error")
-    default = [r for r in table if r["variant"] == "default"]
-    causes = sorted({c for r in default for c in r["causes"]})
-    bottom_acc = np.zeros(len(default))
-    x = np.array([r["error_deg"] for r in default])
-    width = np.maximum(0.6, 0.12 * np.diff(np.r_[x, x[-1] + 5]).min()) if len(x) else 0.6
-    for cause in causes:
-        share = np.array([100 * r["causes"].get(cause, 0) / r["n"] for r in default])
-        bottom.bar(x, share, width=width, bottom=bottom_acc, label=cause)
-        bottom_acc += share
-    bottom.set_xlabel("orientation error θ (degrees, rotation perpendicular to the stem)")
-    bottom.set_ylabel("failures (% of episodes)")
-    bottom.grid(alpha=0.3)
-    if causes:
-        bottom.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dict[str, float] | None = None) -> str:
-    """The Markdown answer: largest tolerable error overall, for tilted and for crowded targets."""
-    crowded = crowded_threshold(rows)
-    subsets = {
-        "all reachable targets": lambda r: True,
-        f"tilted > {TILTED_DEG:g}°": lambda r: r["tilt_deg"] > TILTED_DEG,
-        f"crowded (nearest neighbour < {1000 * crowded:.0f} mm)": lambda r: r["nn_distance"] < crowded,
-    }
-    lines = ["# How accurate must the orientation estimate be?", ""]
-    if command:
-        lines += [f"Reproduce: `{command}`", ""]
-    lines += [f"Answer: the largest orientation error at which the scripted picker's success stays within "
-              f"{WITHIN_PP:g} percentage points of its success with exact (oracle) poses.", "",
-              "| physics | subset | oracle success | tolerable error | episodes per error |", "| --- | --- | --- | --- | --- |"]
-    for variant in dict.fromkeys(r["variant"] for r in rows):
-        for label, keep in subsets.items():
-            table = [t for t in success_table(rows, keep) if t["variant"] == variant]
-            if not table:
-                continue
-            tol = tolerable_error(table, variant)
-            oracle = next((t for t in table if t["error_deg"] == 0.0), None)
-            oracle_text = "n/a" if oracle is None else f"{100 * oracle['success']:.0f} %"
-            tol_text = "n/a" if tol is None else f"{tol:g}°"
-            counts = [t["n"] for t in table]
-            lines.append(f"| {variant} | {label} | {oracle_text} | {tol_text} | {min(counts)}–{max(counts)} |")
-    lines += ["", "Success rate per error (default physics, all reachable targets, 95 % Wilson interval):", "",
-              "| error | success | 95 % CI | n | failure causes |", "| --- | --- | --- | --- | --- |"]
-    for t in success_table(rows):
-        if t["variant"] == "default":
-            causes = ", ".join(f"{k} {v}" for k, v in sorted(t["causes"].items())) or "–"
-            lines.append(f"| {t['error_deg']:g}° | {100 * t['success']:.1f} % | {100 * t['ci_low']:.1f}–{100 * t['ci_high']:.1f} % "
-                         f"| {t['n']} | {causes} |")
-    default_table = [t for t in success_table(rows) if t["variant"] == "default"]
-    tol = tolerable_error(default_table) if default_table else None
-    if tol is not None:
-        lines += ["", "The SMS3D paper's reported errors against this answer:"]
-        for label, err in PAPER_ERRORS_DEG.items():
-            verdict = "within" if err <= tol else "beyond"
-            lines.append(f"- {label}: {err}° — {verdict} the tolerable {tol:g}°.")
-    if perception:
-        lines += ["", f"Perception pose source (oracle masks + shipped pose network): stem-axis error mean "
-                      f"{perception['error_deg']:.1f}°, median {perception['median_error_deg']:.1f}°, 90th percentile "
-                      f"{perception['p90_error_deg']:.1f}°; success {100 * perception['success']:.1f} % "
-                      f"({100 * perception['ci_low']:.1f}–{100 * perception['ci_high']:.1f} %) over {perception['n']} episodes."]
-    return "\n".join(lines) + "\n"
-
-
-def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str = "") -> dict[str, Path]:
-    """CSV, PNG and Markdown summary into ``out``; returns their paths."""
-    perception = perception_point(rows)
-    out = Path(out)
-    paths = {"csv": out / "sweep.csv", "png": out / "sweep.png", "md": out / "summary.md"}
-    write_csv(rows, paths["csv"])
-    plot_sweep(rows, paths["png"], perception)
-    _write_atomic(paths["md"], summarise(rows, command, perception))
-    return paths
 
 
 def _cmd_sweep(args: Any) -> int:

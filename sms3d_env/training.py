@@ -294,7 +294,7 @@ def evaluate_policy_success(model_path: str | Path, episodes: int = 30, pose_err
     "target_held_at_end" (episode counts), "mean_return", "mean_steps",
     "pose_error_deg", "seed", "model"}``.
     """
-    from sms3d_env.accuracy_study import wilson_interval
+    from sms3d_env.study_report import wilson_interval
 
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be an integer >= 1, got {episodes!r}")

@@ -3,15 +3,8 @@ import json
 
 import pytest
 
-from sms3d_env.accuracy_study import (
-    SweepConfig,
-    plan_tasks,
-    run_sweep,
-    success_table,
-    tolerable_error,
-    wilson_interval,
-    write_report,
-)
+from sms3d_env.accuracy_study import SweepConfig, plan_tasks, run_sweep
+from sms3d_env.study_report import success_table, tolerable_error, wilson_interval, write_report
 
 
 def test_wilson_interval_known_values():
