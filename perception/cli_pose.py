@@ -8,6 +8,8 @@ Data: ``--scenes DIR`` reads per-instance clouds from a rendered scene dataset
 (``generator.dataset``; splits train/val, or ``--split`` for evaluation); ``--data`` reads per-instance samples from a ``.npz`` in the :mod:`perception.data`
 format (``--val-data`` likewise); without it, single-mushroom views are rendered on the fly by
 :mod:`perception.synthetic_views` from the generator's model library with the given seeds.
+``--add-synthetic N`` mixes N such views into ``--scenes`` training data; ``--init CHECKPOINT``
+fine-tunes from a checkpoint's weights (same network config) instead of a fresh network.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from pathlib import Path
 import torch
 
 from perception.data import PointCloudPoseDataset, load_samples, samples_from_scenes, save_samples
-from perception.errors import PerceptionConfigError
+from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 from perception.pose_net import PoseNetConfig, load_checkpoint
 from perception.synthetic_views import default_models, generate_samples
 from perception.train import TrainConfig, evaluate, train
@@ -66,16 +68,28 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     cache = Path(args.cache) if args.cache else None
+    if args.add_synthetic and not args.scenes:
+        print("error: --add-synthetic needs --scenes", file=sys.stderr)
+        return 2
     if args.scenes:
         train_s = samples_from_scenes(args.scenes, "train", cap_only=args.cap_only, seed=args.seed)
         val_s = samples_from_scenes(args.scenes, "val", cap_only=args.cap_only, seed=args.seed + 1)
+        if args.add_synthetic:
+            train_s = train_s + _samples(
+                None, args.add_synthetic, args.seed * 1000 + 1, args.model_ids, cache, "train"
+            )
+        print(f"training on {len(train_s)} instances, validating on {len(val_s)}", file=sys.stderr)
     else:
         train_s = _samples(args.data, args.num_train, args.seed * 1000 + 1, args.model_ids, cache, "train")
         val_s = _samples(args.val_data, args.num_val, args.seed * 1000 + 2, args.model_ids, cache, "val")
     tr = PointCloudPoseDataset(train_s, net.num_points, net.use_rgb, cfg.augment, seed=args.seed)
     va = PointCloudPoseDataset(val_s, net.num_points, net.use_rgb, None, seed=args.seed + 1)
     t = time.perf_counter()
-    _, rows = train(net, cfg, tr, va, args.out, resume=args.resume)
+    try:
+        _, rows = train(net, cfg, tr, va, args.out, resume=args.resume, init=args.init)
+    except (CheckpointMismatchError, CheckpointFormatError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     best = min(rows, key=lambda r: r["val_loss"]) if rows else {}
     print(json.dumps({"train_time_s": time.perf_counter() - t, "epochs": len(rows), "best": best}, indent=2))
     return 0
@@ -124,6 +138,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--device", default="cpu")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
+    p.add_argument("--init", help="start from this checkpoint's weights (fine-tune; same network config)")
+    p.add_argument(
+        "--add-synthetic", type=int, default=0, metavar="N",
+        help="with --scenes: also train on N rendered single-mushroom views (seed SEED*1000+1, --model-ids)",
+    )  # fmt: skip
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_train)
 

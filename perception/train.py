@@ -128,18 +128,25 @@ def train(
     out_dir: str | Path,
     resume: bool = False,
     on_epoch: Callable[[dict[str, float]], None] | None = None,
+    init: str | Path | None = None,
 ) -> tuple[PoseNet, list[dict[str, float]]]:
     """Train and return ``(best model in eval mode, per-epoch log rows)``.
 
     With ``resume=True`` and ``out_dir/last.pt`` present, training continues from it (the
     network config must match). Writes ``last.pt``, ``best.pt``, ``log.csv`` and
     ``train_config.json`` in ``out_dir``.
+
+    With ``init``, training starts from the weights of that checkpoint (fine-tuning; its network
+    config must equal ``net_config``, else :class:`CheckpointMismatchError`); a resumed run
+    ignores it.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     seed_everything(cfg.seed)
     device = torch.device(cfg.device)
     model = PoseNet(net_config).to(device)
+    if init is not None:
+        model, _ = load_checkpoint(init, net_config, map_location=device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(
         opt, mode="min", factor=cfg.plateau_factor, patience=cfg.plateau_patience, min_lr=cfg.min_lr
@@ -157,7 +164,10 @@ def train(
         torch.set_rng_state(state["torch_rng"])
         random.setstate(state["python_rng"])
     (out / "train_config.json").write_text(
-        json.dumps({"net": net_config.to_dict(), "train": cfg.to_dict()}, indent=2, default=str)
+        json.dumps(
+            {"net": net_config.to_dict(), "train": cfg.to_dict(), "init": None if init is None else str(init)},
+            indent=2, default=str,
+        )
     )
     loader = _loader(train_set, cfg.batch_size, True, cfg.seed, cfg.num_workers)
     t_start = time.perf_counter()

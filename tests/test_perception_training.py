@@ -118,3 +118,42 @@ def test_resume_continues_from_last_checkpoint(tmp_path, models) -> None:
     _, rows1 = train(net, TrainConfig(epochs=1, progress=False), ds, val, tmp_path)
     _, rows2 = train(net, TrainConfig(epochs=3, progress=False), ds, val, tmp_path, resume=True)
     assert [r["epoch"] for r in rows2] == [1, 2, 3] and rows2[0] == rows1[0]
+
+
+def test_init_fine_tunes_from_a_checkpoint(tmp_path, models) -> None:
+    from perception.errors import CheckpointMismatchError
+    from perception.pose_net import load_checkpoint
+
+    s = generate_samples(48, 4, models, FAST_VIEWS)
+    net = PoseNetConfig(backbone="pointnet", num_points=64)
+    ds, val = PointCloudPoseDataset(s[:32], 64), PointCloudPoseDataset(s[32:], 64)
+    train(net, TrainConfig(epochs=1, progress=False), ds, val, tmp_path / "a")
+    init = tmp_path / "a" / "best.pt"
+    start, _ = load_checkpoint(init)
+    # With a negligible learning rate, the first epoch validates the checkpoint's own weights.
+    tiny = TrainConfig(epochs=1, lr=1e-12, progress=False, augment=None)
+    val_loss = evaluate(start, val, loss=tiny.loss)[0]
+    model, rows = train(net, tiny, ds, val, tmp_path / "b", init=init)
+    assert rows[0]["val_loss"] == pytest.approx(val_loss, rel=1e-5)
+    for k, v in start.state_dict().items():
+        assert torch.allclose(v, model.state_dict()[k], atol=1e-6), k
+    _, scratch = train(net, tiny, ds, val, tmp_path / "c")
+    assert scratch[0]["val_loss"] != pytest.approx(val_loss, rel=1e-5)
+    with pytest.raises(CheckpointMismatchError):
+        train(PoseNetConfig(backbone="pointnet", num_points=128), TrainConfig(epochs=1, progress=False),
+              ds, val, tmp_path / "d", init=init)
+
+
+def test_cli_train_pose_init(tmp_path, models) -> None:
+    from perception.cli_pose import main
+
+    s = generate_samples(40, 5, models, FAST_VIEWS)
+    save_samples(tmp_path / "tr.npz", s[:32])
+    save_samples(tmp_path / "va.npz", s[32:])
+    common = ["train-pose", "--data", str(tmp_path / "tr.npz"), "--val-data", str(tmp_path / "va.npz"),
+              "--backbone", "pointnet", "--epochs", "1", "--threads", "1", "--quiet"]
+    assert main([*common, "--out", str(tmp_path / "a"), "--num-points", "64"]) == 0
+    init = str(tmp_path / "a" / "best.pt")
+    assert main([*common, "--out", str(tmp_path / "b"), "--num-points", "64", "--init", init]) == 0
+    assert main([*common, "--out", str(tmp_path / "c"), "--num-points", "128", "--init", init]) == 2
+    assert main([*common, "--out", str(tmp_path / "d"), "--num-points", "64", "--init", str(tmp_path / "no.pt")]) == 2

@@ -1,0 +1,101 @@
+"""Held-out evaluation of a pose checkpoint through :class:`PoseEstimator` (the table in
+``perception/weights/README.md``).
+
+Test sets: synthetic single-mushroom views of the training models (ids 0-5, seed 3001) and of
+the held-out models (id 6, seed 3002), 500 each; and, with ``--scenes DIR``, every instance of
+a rendered scene dataset split (``sms3d generate``), plus the tallest mushroom of each scene
+(highest cap top among the instances with enough visible points: the picking environment's
+default target). Metrics: geodesic and stem-axis errors (degrees), and the axis error of the
+"always upright" prior (stem along -z of the OpenCV camera, i.e. towards a downward camera).
+
+    python -m perception.eval_pose_heldout --scenes runs/pose_scenes_heldout --split test \\
+        [--checkpoint PATH] [--json OUT.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from perception.data import PointCloudSample, samples_from_scenes
+from perception.estimator import PoseEstimator, default_weights_path
+from perception.synthetic_views import default_models, generate_samples
+
+
+def _metrics(est: PoseEstimator, samples: Sequence[PointCloudSample], batch: int = 64) -> dict[str, float]:
+    t = time.perf_counter()
+    preds = []
+    for i in range(0, len(samples), batch):
+        preds += [e.rotation for e in est.estimate_batch([s.points for s in samples[i : i + batch]])]
+    R_pred = np.stack(preds)
+    R_gt = np.stack([np.asarray(s.rotation, dtype=np.float64) for s in samples])
+    tr = np.einsum("nij,nij->n", R_pred, R_gt)
+    geo = np.degrees(np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0)))
+    ax_gt = R_gt[:, :, 2] / np.linalg.norm(R_gt[:, :, 2], axis=1, keepdims=True)
+    ax = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", R_pred[:, :, 2], ax_gt), -1.0, 1.0)))
+    up = np.degrees(np.arccos(np.clip(-ax_gt[:, 2], -1.0, 1.0)))
+    return {
+        "n": len(samples),
+        "mean_geodesic_deg": float(geo.mean()),
+        "median_geodesic_deg": float(np.median(geo)),
+        "mean_axis_deg": float(ax.mean()),
+        "median_axis_deg": float(np.median(ax)),
+        "p90_axis_deg": float(np.percentile(ax, 90)),
+        "upright_prior_mean_axis_deg": float(up.mean()),
+        "seconds": time.perf_counter() - t,
+    }
+
+
+def tallest_per_scene(root: str | Path, samples: Sequence[PointCloudSample]) -> list[PointCloudSample]:
+    """The sample of each scene whose instance has the highest cap top (world z)."""
+    best: dict[int, tuple[float, PointCloudSample]] = {}
+    for s in samples:
+        sid, iid = s.meta["scene_id"], s.meta["instance_id"]
+        record = json.loads((Path(root) / f"scene_{sid:06d}" / "scene.json").read_text())
+        inst = next(m for m in record["instances"] if m["id"] == iid)
+        z = float(inst["cap_top"][2])
+        if sid not in best or z > best[sid][0]:
+            best[sid] = (z, s)
+    return [best[k][1] for k in sorted(best)]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m perception.eval_pose_heldout")
+    p.add_argument("--checkpoint", help="default: the shipped weights")
+    p.add_argument("--scenes", help="rendered scene dataset folder")
+    p.add_argument("--split", default="test", help="scene split ('all' for every scene)")
+    p.add_argument("--no-synthetic", action="store_true", help="skip the synthetic-view sets")
+    p.add_argument("--num", type=int, default=500, help="synthetic views per set")
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--json", help="also write the results here")
+    args = p.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
+    est = PoseEstimator.from_checkpoint(path, sampling="random", seed=0)
+    out: dict[str, dict[str, float]] = {}
+    if not args.no_synthetic:
+        for label, seed, ids in (("synthetic views, training models (ids 0-5), seed 3001", 3001, (0, 1, 2, 3, 4, 5)),
+                                 ("synthetic views, held-out models (id 6), seed 3002", 3002, (6,))):
+            out[label] = _metrics(est, generate_samples(args.num, seed, default_models(model_ids=ids)))
+            print(label, json.dumps(out[label]), flush=True)
+    if args.scenes:
+        split = None if args.split == "all" else args.split
+        samples = samples_from_scenes(args.scenes, split, seed=0)
+        for label, ss in ((f"scenes {args.scenes} ({args.split}), every instance", samples),
+                          (f"scenes {args.scenes} ({args.split}), tallest mushroom per scene",
+                           tallest_per_scene(args.scenes, samples))):
+            out[label] = _metrics(est, ss)
+            print(label, json.dumps(out[label]), flush=True)
+    if args.json:
+        Path(args.json).write_text(json.dumps({"checkpoint": str(path), "results": out}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
