@@ -63,6 +63,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, loss=args.loss, seed=args.seed,
             device=args.device, plateau_patience=args.patience, progress=not args.quiet,
             time_limit_s=None if args.time_limit_min is None else args.time_limit_min * 60.0,
+            select_by=args.select_by,
         )  # fmt: skip
     except PerceptionConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -134,6 +135,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--cap-only", action="store_true", help="with --scenes: cap points only")
     p.add_argument("--cache", help="folder to cache rendered views as .npz")
     p.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this wall time")
+    p.add_argument("--select-by", choices=("loss", "axis"), default="loss",
+                   help="which epoch best.pt keeps: lowest validation loss or lowest mean stem-axis error")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu")
     p.add_argument("--threads", type=int, default=2)

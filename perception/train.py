@@ -60,6 +60,7 @@ class TrainConfig:
     augment: AugmentConfig | None = field(default_factory=AugmentConfig)
     progress: bool = True
     time_limit_s: float | None = None  # stop after the first epoch that ends past this budget
+    select_by: str = "loss"  # best.pt: lowest validation "loss", or lowest mean stem-"axis" error
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size", "plateau_patience"):
@@ -76,6 +77,8 @@ class TrainConfig:
             raise PerceptionConfigError("plateau_factor", f"must be in (0, 1), got {self.plateau_factor!r}")
         if not (np.isfinite(self.weight_decay) and self.weight_decay >= 0):
             raise PerceptionConfigError("weight_decay", f"must be >= 0, got {self.weight_decay!r}")
+        if self.select_by not in ("loss", "axis"):
+            raise PerceptionConfigError("select_by", f"expected 'loss' or 'axis', got {self.select_by!r}")
         if self.loss not in ROTATION_LOSSES:
             raise PerceptionConfigError("loss", f"expected one of {ROTATION_LOSSES}, got {self.loss!r}")
         if self.device != "cpu" and not self.device.startswith("cuda"):
@@ -197,8 +200,10 @@ def train(
             "val_median_axis_deg": m.median_axis_deg, "epoch_s": time.perf_counter() - t0,
         }  # fmt: skip
         rows.append(row)
-        if val_loss < best:
-            best = val_loss
+        # The loss is dominated by yaw, which a round cap hides; "axis" keeps what a picker uses.
+        score = val_loss if cfg.select_by == "loss" else m.mean_axis_deg
+        if score < best:
+            best = score
             save_checkpoint(best_path, model, {"epoch": epoch + 1, "val": m.as_dict(), "val_loss": val_loss})
         save_checkpoint(last_path, model, {"epoch": epoch + 1, "val": m.as_dict(), "val_loss": val_loss})
         atomic_torch_save(

@@ -13,6 +13,7 @@ from perception.data import (
     load_samples,
     save_samples,
 )
+from perception.errors import PerceptionConfigError
 from perception.pose_net import PoseNet, PoseNetConfig
 from perception.rotations import CHANCE_AXIS_DEG, CHANCE_GEODESIC_DEG
 from perception.synthetic_views import ViewConfig, default_models, generate_samples, render_view
@@ -157,3 +158,18 @@ def test_cli_train_pose_init(tmp_path, models) -> None:
     assert main([*common, "--out", str(tmp_path / "b"), "--num-points", "64", "--init", init]) == 0
     assert main([*common, "--out", str(tmp_path / "c"), "--num-points", "128", "--init", init]) == 2
     assert main([*common, "--out", str(tmp_path / "d"), "--num-points", "64", "--init", str(tmp_path / "no.pt")]) == 2
+
+
+def test_best_checkpoint_selected_by_axis_error(tmp_path, models) -> None:
+    from perception.pose_net import read_checkpoint
+
+    s = generate_samples(48, 5, models, FAST_VIEWS)
+    net = PoseNetConfig(backbone="pointnet", num_points=64)
+    ds = PointCloudPoseDataset(s[:32], 64)
+    val = PointCloudPoseDataset(s[32:], 64)
+    _, rows = train(net, TrainConfig(epochs=4, lr=3e-3, progress=False, select_by="axis"), ds, val, tmp_path)
+    kept = read_checkpoint(tmp_path / "best.pt")
+    best_row = min(rows, key=lambda r: r["val_mean_axis_deg"])
+    assert kept["extra"]["epoch"] == best_row["epoch"]
+    with pytest.raises(PerceptionConfigError, match="select_by"):
+        TrainConfig(select_by="geodesic")
