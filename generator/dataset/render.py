@@ -46,11 +46,6 @@ class Frame:
     realism: dict[str, Any] = field(default_factory=dict)
 
 
-def render_intrinsics(scene: Scene) -> Intrinsics:
-    """Intrinsics of the rendered image in OpenCV's pixel convention (pixel centres at integers)."""
-    return camera_intrinsics(scene.config.camera)
-
-
 class SceneRenderer:
     """Reusable offscreen renderer for scenes of one image size. Close it (or use ``with``)."""
 
@@ -108,7 +103,7 @@ class SceneRenderer:
         mujoco.mj_forward(model, data)
         cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
         pose = world_from_camera_cv(data.cam_xpos[cam].copy(), data.cam_xmat[cam].reshape(3, 3).copy())
-        intr = render_intrinsics(scene)
+        intr = camera_intrinsics(cam_cfg)
 
         # geom id -> instance id, and which geoms are caps
         geom_instance = np.full(model.ngeom + 1, -1, dtype=np.int64)  # last entry: background (-1)
