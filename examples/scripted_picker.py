@@ -10,7 +10,8 @@ import argparse
 import gymnasium as gym
 
 import sms3d_env
-from sms3d_env.demo import picker_strip, save_rgb
+from generator.files import save_rgb_png
+from sms3d_env.demo import picker_strip
 
 
 def main() -> None:
@@ -23,7 +24,7 @@ def main() -> None:
     env = gym.make("SMS3DPick-v0", pose_source="noisy", pose_error_deg=args.pose_error_deg,
                    render_mode="rgb_array", camera="side", render_size=(240, 320))
     strip, info = picker_strip(env, sms3d_env.ScriptedPicker.for_env(env), args.seed, args.frames)
-    save_rgb(args.out, strip)
+    save_rgb_png(args.out, strip)
     print(f"success={info['is_success']} cause={info['failure_cause']} -> {args.out}")
     env.close()
 

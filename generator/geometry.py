@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 
@@ -16,6 +17,16 @@ def rotation_xyz(roll: float, pitch: float, yaw: float) -> np.ndarray:
     ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
     rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
     return rz @ ry @ rx
+
+
+def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation by ``angle`` radians about ``axis`` (any non-zero length)."""
+    axis = np.asarray(axis, dtype=float)
+    q = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(q, axis / np.linalg.norm(axis), angle)
+    r = np.zeros(9)
+    mujoco.mju_quat2Mat(r, q)
+    return r.reshape(3, 3)
 
 
 def tilt_angle(rotation: np.ndarray) -> float:

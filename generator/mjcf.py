@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 
 from generator.camera import camera_intrinsics, camera_rotation_mujoco
+from generator.files import write_atomic
 from generator.mushroom_models import COLOURS
 from generator.scene import Scene
 
@@ -139,7 +140,5 @@ def write_mjcf(scene: Scene, folder: str | Path, **kwargs: bool) -> Path:
     for name, data in spec.assets.items():
         (folder / name).write_bytes(data)
     xml_path = folder / "scene.xml"
-    tmp = xml_path.with_suffix(".xml.tmp")
-    tmp.write_text(spec.to_xml(), encoding="utf-8")
-    tmp.replace(xml_path)
+    write_atomic(xml_path, spec.to_xml())
     return xml_path

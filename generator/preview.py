@@ -10,6 +10,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco  # noqa: E402
 
+from generator.files import save_rgb_png  # noqa: E402
 from generator.mjcf import scene_to_model  # noqa: E402
 from generator.scene import Scene  # noqa: E402
 
@@ -34,8 +35,4 @@ def render_views(scene: Scene, width: int = 640, height: int = 480) -> np.ndarra
 
 def save_preview(scene: Scene, path: str, width: int = 640, height: int = 480) -> None:
     """Write ``render_views`` as a PNG."""
-    import cv2
-
-    image = render_views(scene, width, height)
-    if not cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
-        raise OSError(f"cannot write {path}")
+    save_rgb_png(path, render_views(scene, width, height))

@@ -11,6 +11,7 @@ import numpy as np
 
 from generator.config import SceneConfig, Species
 from generator.errors import SceneFormatError
+from generator.files import write_atomic
 from generator.geometry import OrientedBox
 from generator.mushroom_models import MushroomModel, model_library
 from generator.terrain import Terrain
@@ -144,10 +145,7 @@ class Scene:
 
     def save(self, path: str | Path) -> None:
         """Write atomically (temporary file, then rename)."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(self.to_json(), encoding="utf-8")
-        tmp.replace(path)
+        write_atomic(path, self.to_json())
 
     @classmethod
     def load(cls, path: str | Path) -> Scene:

@@ -20,6 +20,7 @@ from functools import cache
 import numpy as np
 import trimesh
 
+from generator.geometry import rotation_xyz
 from perception.data import PointCloudSample
 from perception.errors import PerceptionConfigError
 from perception.pointcloud import MIN_POINTS, Intrinsics, depth_to_points
@@ -100,18 +101,6 @@ def default_models(species: Sequence[str] = ("white", "brown"), model_ids: Seque
 def _surface(mesh_id: int, mesh: trimesh.Trimesh, n: int) -> tuple[np.ndarray, np.ndarray]:
     pts, face = trimesh.sample.sample_surface(mesh, n, seed=0)
     return np.asarray(pts), np.asarray(mesh.face_normals[face])
-
-
-def rotation_xyz(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """``Rz(yaw) @ Ry(pitch) @ Rx(roll)``."""
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
-    )
 
 
 def render_view(model: MeshModel, rng: np.random.Generator, config: ViewConfig | None = None) -> PointCloudSample:

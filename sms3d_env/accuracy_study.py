@@ -20,8 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from generator.files import write_atomic
 from sms3d_env.physics import PickPhysicsParams
-from sms3d_env.study_report import write_atomic, write_report
+from sms3d_env.study_report import write_report
 
 DEFAULT_ERRORS_DEG = (0.0, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0)
 # Physics settings with no published source, varied to show how the answer depends on them:

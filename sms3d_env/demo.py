@@ -31,13 +31,6 @@ def picker_strip(env: Any, policy: Any, seed: int, frames: int = 6) -> tuple[np.
     return np.concatenate([images[i] for i in idx], axis=1), info
 
 
-def save_rgb(path: str | Path, image: np.ndarray) -> None:
-    import cv2
-
-    if not cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
-        raise OSError(f"cannot write {path}")
-
-
 def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -> dict[str, float]:
     """Write ``scene.png`` and picker strips into ``out``; return success rates per pose error."""
     import gymnasium as gym
@@ -45,6 +38,7 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
 
     import sms3d_env  # noqa: F401 - registers the environments
     from generator import SceneConfig, generate_scene
+    from generator.files import save_rgb_png
     from generator.preview import save_preview
     from sms3d_env.scripted_picker import ScriptedPicker, run_episode
 
@@ -59,7 +53,7 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
                        render_mode="rgb_array", camera="side", render_size=(240, 320))
         picker = ScriptedPicker.for_env(env)
         strip, info = picker_strip(env, picker, seed)
-        save_rgb(out / f"pick_error_{error:g}deg.png", strip)
+        save_rgb_png(out / f"pick_error_{error:g}deg.png", strip)
         results = [run_episode(env, picker, seed + k) for k in tqdm(range(episodes), desc=f"picking, pose error {error:g}°")]
         env.close()
         reachable = [r for r in results if r["reachable"]]

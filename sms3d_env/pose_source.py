@@ -11,8 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-import mujoco
 import numpy as np
+
+from generator.geometry import axis_angle_matrix
 
 
 @dataclass(frozen=True)
@@ -29,14 +30,6 @@ class PoseEstimate:
 
 class PoseSource(Protocol):
     def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate: ...
-
-
-def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    q = np.zeros(4)
-    mujoco.mju_axisAngle2Quat(q, axis / np.linalg.norm(axis), angle)
-    r = np.zeros(9)
-    mujoco.mju_quat2Mat(r, q)
-    return r.reshape(3, 3)
 
 
 class OraclePose:
@@ -68,7 +61,7 @@ class NoisyPose:
         e1 = truth.rotation[:, 0]
         e2 = truth.rotation[:, 1]
         perp = np.cos(phi) * e1 + np.sin(phi) * e2
-        rot = _axis_angle(perp, self.error) @ truth.rotation if self.error > 0 else truth.rotation
+        rot = axis_angle_matrix(perp, self.error) @ truth.rotation if self.error > 0 else truth.rotation
         centre = truth.cap_top + (rng.normal(0, self.position_std, 3) if self.position_std > 0 else 0)
         return PoseEstimate(np.asarray(centre, float), rot)
 

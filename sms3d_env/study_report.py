@@ -4,23 +4,17 @@ the CSV, PNG and Markdown outputs."""
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from generator.files import write_atomic
+
 TILTED_DEG = 30.0  # "tilted" mushrooms in the summary
 WITHIN_PP = 5.0  # success within this many percentage points of the oracle counts as "enough"
 PAPER_ERRORS_DEG = {"SMS3D synthetic (Point Transformer)": 1.67, "SMS3D real (M18K)": 3.68}
-
-
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary file beside ``path``, then rename it into place."""
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:

@@ -14,12 +14,7 @@ import mujoco
 import numpy as np
 
 from generator.dataset.options import STEREO_BASELINE_M, RealismOptions
-
-
-def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
+from generator.geometry import axis_angle_matrix
 
 
 def randomise_model(model: mujoco.MjModel, options: RealismOptions, rng: np.random.Generator) -> dict[str, Any]:
@@ -49,7 +44,7 @@ def randomise_model(model: mujoco.MjModel, options: RealismOptions, rng: np.rand
         tilt = math.radians(float(rng.uniform(0, options.camera_tilt_jitter_deg)))
         rot = np.zeros(9)
         mujoco.mju_quat2Mat(rot, model.cam_quat[cam])
-        rot = _axis_angle(np.array([math.cos(phi), math.sin(phi), 0.0]), tilt) @ rot.reshape(3, 3)
+        rot = axis_angle_matrix(np.array([math.cos(phi), math.sin(phi), 0.0]), tilt) @ rot.reshape(3, 3)
         quat = np.zeros(4)
         mujoco.mju_mat2Quat(quat, rot.ravel())
         model.cam_pos[cam, 2] += dz
