@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from generator import SceneConfig, SceneFormatError, generate_scene, load_mushroom_mesh
+from generator import Scene, SceneConfig, SceneFormatError, generate_scene, load_mushroom_mesh
 from generator.errors import MeshError
 from generator.mjcf import scene_to_model, scene_to_spec, write_mjcf
 from generator.terrain import Terrain
@@ -32,8 +32,9 @@ def test_corrupt_scene_file_is_named(tmp_path):
     path = tmp_path / "bad.json"
     path.write_text('{"schema_version": 1, "seed": ')
     with pytest.raises(SceneFormatError, match="bad.json"):
-        type(generate_scene).__call__  # noqa: B018 - keep the import used
-        from generator import Scene
+        Scene.load(path)
+    path.write_text('{"schema_version": 99}')
+    with pytest.raises(SceneFormatError, match="schema_version"):
         Scene.load(path)
 
 
