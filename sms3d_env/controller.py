@@ -47,12 +47,31 @@ class ControllerConfig:
                 raise ValueError(f"ControllerConfig.{name} must be > 0, got {v!r}")
 
 
-def _rotvec_to_mat(w: np.ndarray) -> np.ndarray:
-    q = np.zeros(4)
-    mujoco.mju_axisAngle2Quat(q, w / max(np.linalg.norm(w), 1e-12), float(np.linalg.norm(w)))
-    r = np.zeros(9)
-    mujoco.mju_quat2Mat(r, q)
-    return r.reshape(3, 3)
+class ArmBoxLimit(mink.Limit):
+    """The arm's joint position limits and speed limit as one box on the IK step ``dq``.
+
+    The same feasible set as mink's ``ConfigurationLimit`` (same ``gain``) together with a
+    ``VelocityLimit``, built on one constant ``G = [I; -I]`` over the arm's dofs: the pair
+    rebuilt and stacked their matrices every step, a third of the controller's time.
+    """
+
+    def __init__(self, model: mujoco.MjModel, joints: list[str], max_speed: float,
+                 gain: float = 0.95) -> None:
+        ids = [model.joint(j).id for j in joints]
+        self.qadr = model.jnt_qposadr[ids]
+        rows = np.eye(model.nv)[model.jnt_dofadr[ids]]
+        self.G = np.vstack([rows, -rows])
+        limited = model.jnt_limited[ids].astype(bool)
+        self.lower = np.where(limited, model.jnt_range[ids, 0], -np.inf)
+        self.upper = np.where(limited, model.jnt_range[ids, 1], np.inf)
+        self.max_speed, self.gain = max_speed, gain
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        q = configuration.data.qpos[self.qadr]
+        step = self.max_speed * dt
+        h = np.concatenate([np.minimum(step, self.gain * (self.upper - q)),
+                            np.minimum(step, self.gain * (q - self.lower))])
+        return mink.Constraint(G=self.G, h=h)
 
 
 class IKController:
@@ -72,9 +91,8 @@ class IKController:
         cost = np.full(self.model.nv, cfg.posture_cost)
         cost[self.model.jnt_dofadr[self.model.joint(PREFIX + ARM_JOINTS[-1]).id]] = 0.0
         self.posture_task = mink.PostureTask(self.model, cost=cost)
-        vel = {PREFIX + j: cfg.max_joint_speed for j in ARM_JOINTS}
-        self.limits = [mink.ConfigurationLimit(self.model), mink.VelocityLimit(self.model, vel)]
-        self.q_home = self.model.qpos0.copy()
+        self.tasks = [self.frame_task, self.posture_task]
+        self.limits = [ArmBoxLimit(self.model, [PREFIX + j for j in ARM_JOINTS], cfg.max_joint_speed)]
 
     def reset(self, q_arm: np.ndarray, q_home: np.ndarray | None = None) -> None:
         """Set the commanded configuration (and the posture target) to ``q_arm``."""
@@ -95,28 +113,39 @@ class IKController:
         d = self.configuration.data
         return d.site_xpos[self.site_id].copy(), d.site_xmat[self.site_id].reshape(3, 3).copy()
 
+    def _solve(self, target: mink.SE3, dt: float) -> np.ndarray:
+        self.frame_task.set_target(target)
+        v = mink.solve_ik(self.configuration, self.tasks, dt, "daqp", damping=self.cfg.damping,
+                          limits=self.limits)
+        self.configuration.integrate_inplace(v, dt)
+        return self.configuration.q[self.arm_qadr]
+
     def solve_to(self, pos: np.ndarray, rot: np.ndarray, dt: float | None = None) -> np.ndarray:
         """One IK step toward a tool pose; returns the new commanded arm angles."""
-        dt = self.dt if dt is None else dt
         target = mink.SE3.from_rotation_and_translation(mink.SO3.from_matrix(rot), pos)
-        self.frame_task.set_target(target)
-        v = mink.solve_ik(self.configuration, [self.frame_task, self.posture_task], dt, "daqp",
-                          damping=self.cfg.damping, limits=self.limits)
-        self.configuration.integrate_inplace(v, dt)
-        return self.q_cmd
+        return self._solve(target, self.dt if dt is None else dt)
 
     def step(self, twist: np.ndarray, q_measured: np.ndarray) -> np.ndarray:
         """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period."""
-        gap = self.q_cmd - q_measured
+        q = self.configuration.q
+        gap = q[self.arm_qadr] - q_measured
         lead = np.clip(gap, -self.cfg.max_lead, self.cfg.max_lead)
         if np.abs(lead - gap).max() > 1e-8:
-            q = self.configuration.q.copy()
             q[self.arm_qadr] = q_measured + lead
             self.configuration.update(q)
-        pos, rot = self.tool_pose()
-        pos = pos + twist[:3] * self.dt
-        rot = _rotvec_to_mat(twist[3:] * self.dt) @ rot
-        return self.solve_to(pos, rot)
+        # Target = the commanded tool pose moved by the twist, the rotation composed in
+        # quaternions (no rotation-matrix round trip).
+        d = self.configuration.data
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, d.site_xmat[self.site_id])
+        w = twist[3:] * self.dt
+        angle = float(np.linalg.norm(w))
+        if angle > 0.0:
+            turn = np.empty(4)
+            mujoco.mju_axisAngle2Quat(turn, w / angle, angle)
+            mujoco.mju_mulQuat(quat, turn, quat.copy())
+        pos = d.site_xpos[self.site_id] + twist[:3] * self.dt
+        return self._solve(mink.SE3(np.concatenate([quat, pos])), self.dt)
 
     def reaches(self, pos: np.ndarray, rot: np.ndarray, q_start: np.ndarray, iters: int = 60,
                 pos_tol: float = 0.004, ang_tol_deg: float = 4.0) -> tuple[bool, np.ndarray]:
