@@ -9,6 +9,7 @@ how hard the tool can press.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mink
@@ -129,9 +130,8 @@ class IKController:
         """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period."""
         q = self.configuration.q
         gap = q[self.arm_qadr] - q_measured
-        lead = np.clip(gap, -self.cfg.max_lead, self.cfg.max_lead)
-        if np.abs(lead - gap).max() > 1e-8:
-            q[self.arm_qadr] = q_measured + lead
+        if np.abs(gap).max() > self.cfg.max_lead + 1e-8:
+            q[self.arm_qadr] = q_measured + gap.clip(-self.cfg.max_lead, self.cfg.max_lead)
             self.configuration.update(q)
         # Target = the commanded tool pose moved by the twist, the rotation composed in
         # quaternions (no rotation-matrix round trip).
@@ -139,7 +139,7 @@ class IKController:
         quat = np.empty(4)
         mujoco.mju_mat2Quat(quat, d.site_xmat[self.site_id])
         w = twist[3:] * self.dt
-        angle = float(np.linalg.norm(w))
+        angle = math.hypot(*w)
         if angle > 0.0:
             turn = np.empty(4)
             mujoco.mju_axisAngle2Quat(turn, w / angle, angle)

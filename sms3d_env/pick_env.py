@@ -39,6 +39,11 @@ FAILURE_CAUSES = ("no_seal", "grip_lost", "not_detached", "bruised", "neighbour_
 _EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
 _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
 _STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION)
+# State observation entries and their sizes, in the order of the flat vector they are cut from.
+_OBS_SIZES = {"joint_pos": 6, "joint_vel": 6, "tool_pose": 7, "suction": 3, "target_pose": 6,
+              "target_rel": 3}
+_OBS_SLICES = {k: slice(end - n, end) for (k, n), end in
+               zip(_OBS_SIZES.items(), np.cumsum(list(_OBS_SIZES.values())).tolist(), strict=True)}
 
 
 @dataclass
@@ -46,6 +51,7 @@ class _EpisodeState:
     target: int = 0
     reachable: bool = True
     estimate: PoseEstimate | None = None
+    target_pose: np.ndarray = field(default_factory=lambda: np.zeros(6))  # estimate: cap top, axis
     grip: int = -1  # mushroom id held by the cup, -1 if none
     grip_util: float = 0.0
     suction_on: bool = False
@@ -145,15 +151,9 @@ class SMS3DPickEnv(gym.Env):
         self.home_q = np.asarray(self.robot_cfg.home_q, float)
         self.reach = Reachability(self.ik.model, self.ik.arm_qadr, self.home_q)
         self.action_space = spaces.Box(-1.0, 1.0, (7,), np.float32)
+        self._twist_scale = np.repeat([self.ctrl_cfg.max_linear_speed, self.ctrl_cfg.max_angular_speed], 3)
         inf = np.inf
-        obs = {
-            "joint_pos": spaces.Box(-inf, inf, (6,), np.float64),
-            "joint_vel": spaces.Box(-inf, inf, (6,), np.float64),
-            "tool_pose": spaces.Box(-inf, inf, (7,), np.float64),
-            "suction": spaces.Box(-inf, inf, (3,), np.float64),
-            "target_pose": spaces.Box(-inf, inf, (6,), np.float64),
-            "target_rel": spaces.Box(-inf, inf, (3,), np.float64),
-        }
+        obs = {k: spaces.Box(-inf, inf, (n,), np.float64) for k, n in _OBS_SIZES.items()}
         if image_obs:
             h, w = self.image_size
             obs["rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
@@ -189,6 +189,7 @@ class SMS3DPickEnv(gym.Env):
             near = np.linalg.norm(base - base[target], axis=1) <= self.free_radius
             free = {int(i) for i in np.nonzero(near)[0]} | {int(target)}
         self.is_free = np.array([i in free for i in range(n)])
+        self.free_ids = np.array(sorted(free))
         spec = scene_to_spec(scene, free_ids=free)
         attach_robot(spec, self.robot_cfg)
         for i in sorted(free):
@@ -264,6 +265,7 @@ class SMS3DPickEnv(gym.Env):
                                                     self.reach, index=self.target_index,
                                                     max_tilt_deg=self.max_tilt_deg)
         ep.estimate = self.pose_source(scene, ep.target, self.np_random)
+        ep.target_pose = np.concatenate([ep.estimate.cap_top, ep.estimate.stem_axis])
         self._build(scene, ep.target)
         m, d = self.model, self.data
         self._ep = ep
@@ -289,17 +291,15 @@ class SMS3DPickEnv(gym.Env):
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (7,):
             raise ValueError(f"action must have shape (7,), got {a.shape}")
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ValueError(f"action contains NaN or inf: {a.tolist()}")
-        a = np.clip(a, -1.0, 1.0)
+        a = a.clip(-1.0, 1.0)
         m, d, ep = self.model, self.data, self._ep
-        twist = np.concatenate([a[:3] * self.ctrl_cfg.max_linear_speed,
-                                a[3:6] * self.ctrl_cfg.max_angular_speed])
         ep.suction_on = bool(a[6] > 0)
         if not ep.suction_on and ep.grip >= 0:
             self._release()
         try:
-            d.ctrl[:6] = self.ik.step(twist, d.qpos[self.arm_qadr].copy())
+            d.ctrl[:6] = self.ik.step(a[:6] * self._twist_scale, d.qpos[self.arm_qadr])
         except Exception:  # mink raises when the QP has no solution: hold the last command
             pass
         badqacc = d.warning[_BADQACC]
@@ -309,7 +309,7 @@ class SMS3DPickEnv(gym.Env):
                 if badqacc.number > 0:
                     break
                 self._picking_physics()
-        if badqacc.number > 0 or not np.all(np.isfinite(d.qpos)):
+        if badqacc.number > 0 or not np.isfinite(d.qpos).all():
             ep.unstable = True
         self.steps += 1
         self._update_neighbours()
@@ -458,9 +458,11 @@ class SMS3DPickEnv(gym.Env):
 
     def _update_neighbours(self) -> None:
         ep = self._ep
-        moved = np.linalg.norm(self.data.xpos[self.body_ids] - self.init_xpos, axis=1)
-        for k in np.nonzero(moved > self.params.disturb_tolerance)[0]:
-            if int(k) != ep.target:
+        # Only mushrooms with a free joint can move (the others are static bodies).
+        free = self.free_ids
+        moved = self.data.xpos[self.body_ids[free]] - self.init_xpos[free]
+        for k in free[np.einsum("ij,ij->i", moved, moved) > self.params.disturb_tolerance**2]:
+            if k != ep.target:
                 ep.disturbed.add(int(k))
         ep.disturbed |= {k for k in ep.detached if k != ep.target}
         m = self.model
@@ -508,9 +510,8 @@ class SMS3DPickEnv(gym.Env):
     def _reward(self, success: bool) -> float:
         d, ep = self.data, self._ep
         s = RewardState(
-            tool_pos=d.site_xpos[self.tool_site].copy(),
-            tool_axis=d.site_xmat[self.tool_site].reshape(3, 3)[:, 2].copy(),
-            est_cap_top=ep.estimate.cap_top, est_axis=ep.estimate.stem_axis,
+            tool_pos=d.site_xpos[self.tool_site], tool_axis=d.site_xmat[self.tool_site, 2::3],
+            est_cap_top=ep.target_pose[:3], est_axis=ep.target_pose[3:],
             gripped_target=ep.grip == ep.target, target_detached=ep.target_detached,
             lift=self._lift(), lift_goal=self.params.lift_height, success=success,
             bruised=bool(ep.bruised))
@@ -555,21 +556,17 @@ class SMS3DPickEnv(gym.Env):
 
     def _obs(self) -> dict[str, np.ndarray]:
         d, ep = self.data, self._ep
-        pos = d.site_xpos[self.tool_site].copy()
-        quat = np.zeros(4)
+        pos = d.site_xpos[self.tool_site]
+        quat = np.empty(4)
         mujoco.mju_mat2Quat(quat, d.site_xmat[self.tool_site])
-        est = ep.estimate
-        obs = {
-            "joint_pos": d.qpos[self.arm_qadr].copy(),
-            "joint_vel": d.qvel[self.arm_dadr].copy(),
-            "tool_pose": np.concatenate([pos, quat]),
-            "suction": np.array([float(ep.suction_on), float(ep.grip >= 0), ep.grip_util]),
-            "target_pose": np.concatenate([est.cap_top, est.stem_axis]),
-            "target_rel": est.cap_top - pos,
-        }
-        for k, v in obs.items():
-            if not np.isfinite(v).all():
-                obs[k] = np.nan_to_num(v)
+        # One flat vector, one finiteness check, then views per entry (small-array numpy calls
+        # dominate here, not arithmetic).
+        flat = np.concatenate([d.qpos[self.arm_qadr], d.qvel[self.arm_dadr], pos, quat,
+                               (float(ep.suction_on), float(ep.grip >= 0), ep.grip_util),
+                               ep.target_pose, ep.target_pose[:3] - pos])
+        if not np.isfinite(flat).all():
+            flat = np.nan_to_num(flat)
+        obs = {k: flat[sl] for k, sl in _OBS_SLICES.items()}
         if self.image_obs:
             h, w = self.image_size
             rgb = self._render(h, w, depth=False)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,11 +35,11 @@ def compute_reward(s: RewardState, reward_type: str) -> float:
     """
     if reward_type == "sparse":
         return 0.0 if s.success else -1.0
-    dist = float(np.linalg.norm(s.tool_pos - s.est_cap_top))
-    align = float(-s.tool_axis @ s.est_axis)
+    dist = math.dist(s.tool_pos, s.est_cap_top)
+    align = -float(s.tool_axis @ s.est_axis)
     r = -dist + 0.1 * align
     held = s.gripped_target
     r += 0.5 * held + 1.0 * (s.target_detached and held)
-    r += 2.0 * float(np.clip(s.lift / s.lift_goal, 0.0, 1.0)) * held
+    r += 2.0 * min(max(s.lift / s.lift_goal, 0.0), 1.0) * held
     r += 5.0 * s.success - 2.0 * s.bruised
     return r
