@@ -417,9 +417,8 @@ class SMS3DPickEnv(gym.Env):
             force, torque = ph.free_body_wrench(q, self.dofadr[k], rot)
             axis = rot[:, 2]
             tension = max(0.0, -float(force @ axis))
-            tw = float(torque @ axis)
-            bend = float(np.linalg.norm(torque - tw * axis))
-            u = ph.root_utilisation(np.array(tension), np.array(bend), np.array(abs(tw)), self.params)
+            tw, bend = ph.axial_split(torque, axis)
+            u = ph.root_utilisation(tension, bend, abs(tw), self.params)
             if u >= 1.0:
                 d.eq_active[self.root_eq[k]] = 0
                 for g in (self.cap_geoms[k], self.stem_geoms[k]):
@@ -446,10 +445,9 @@ class SMS3DPickEnv(gym.Env):
         ep = self._ep
         k = ep.grip
         force, torque_c, z = self.grip_wrench()
-        fz = float(force @ z)
-        tz = float(torque_c @ z)
-        u = ph.grip_utilisation(max(0.0, -fz), float(np.linalg.norm(force - fz * z)),
-                                float(np.linalg.norm(torque_c - tz * z)), abs(tz), self.params)
+        fz, shear = ph.axial_split(force, z)
+        tz, bend = ph.axial_split(torque_c, z)
+        u = ph.grip_utilisation(max(0.0, -fz), shear, bend, abs(tz), self.params)
         ep.grip_util = u
         if u >= 1.0:
             if k == ep.target and ep.target_detached:
