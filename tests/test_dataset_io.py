@@ -55,6 +55,30 @@ def test_coco_loads_and_links_to_scene_json(reference):
     assert n_anns > 20
 
 
+def test_rle_encoders_match_pycocotools():
+    from pycocotools import mask as mask_utils
+
+    from generator.dataset.coco import encode_labels, encode_mask
+
+    def reference_rle(mask):
+        rle = mask_utils.encode(np.asfortranarray(mask.astype(np.uint8)))
+        return {"size": [int(s) for s in rle["size"]], "counts": rle["counts"].decode("ascii")}
+
+    rng = np.random.default_rng(0)
+    for trial in range(60):
+        h, w = (int(n) for n in rng.integers(1, 25, 2))
+        labels = rng.integers(0, 4, (h, w)).astype(np.uint16)
+        labels[rng.random((h, w)) < 0.6 * (trial % 3)] = 0  # sparse, dense and empty-ish images
+        if trial % 7 == 0:
+            labels[:] = 3  # a label that fills the image: no zero runs at all
+        encoded = encode_labels(labels)
+        assert sorted(encoded) == [int(k) for k in np.unique(labels) if k]
+        for k in range(4):
+            assert encode_mask(labels == k) == reference_rle(labels == k)
+            if k in encoded:
+                assert encoded[k] == reference_rle(labels == k)
+
+
 def test_manifest_lists_complete_scenes_and_versions(reference):
     import json
 

@@ -28,6 +28,22 @@ def test_json_round_trip_is_exact(scene, tmp_path):
     assert type(scene).load(path).to_json() == scene.to_json()
 
 
+def test_schema_1_scene_with_listed_heights_still_loads(scene):
+    old = scene.to_dict()
+    old["schema_version"] = 1
+    old["terrain"]["heights"] = scene.terrain.heights.tolist()
+    again = type(scene).from_json(json.dumps(old))
+    assert again.to_json() == scene.to_json()
+    assert np.array_equal(again.terrain.heights, scene.terrain.heights)
+
+
+def test_bad_encoded_heights_are_named(scene):
+    data = scene.to_dict()
+    data["terrain"]["heights"]["base64"] = data["terrain"]["heights"]["base64"][:-8]
+    with pytest.raises(SceneFormatError, match="terrain.heights"):
+        type(scene).from_json(json.dumps(data))
+
+
 def test_corrupt_scene_file_is_named(tmp_path):
     path = tmp_path / "bad.json"
     path.write_text('{"schema_version": 1, "seed": ')

@@ -28,6 +28,8 @@ from generator.scene import Scene
 
 CAMERA = "overhead"
 _HIDDEN_GROUP = 5  # a geom group the default MjvOption does not draw
+# Nothing here draws text: the smallest font atlas makes a render context cheaper to create.
+_FONT_SCALE = mujoco.mjtFontScale.mjFONTSCALE_50
 
 
 @dataclass
@@ -70,14 +72,15 @@ class SceneRenderer:
         r = self._renderer
         if r is None or not all(hasattr(r, a) for a in ("_mjr_context", "_gl_context", "_scene", "_model")):
             self.close()
-            self._renderer = mujoco.Renderer(model, self.height, self.width, max_geom=model.ngeom + 64)
+            self._renderer = mujoco.Renderer(model, self.height, self.width, max_geom=model.ngeom + 64,
+                                             font_scale=_FONT_SCALE)
             return self._renderer
         if r._gl_context:
             r._gl_context.make_current()
         r._mjr_context.free()
         r._model = model
         r._scene = mujoco.MjvScene(model=model, maxgeom=model.ngeom + 64)
-        r._mjr_context = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+        r._mjr_context = mujoco.MjrContext(model, _FONT_SCALE.value)
         mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, r._mjr_context)
         r._mjr_context.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
         return r
@@ -91,9 +94,12 @@ class SceneRenderer:
             raise ValueError(f"renderer is {self.width}x{self.height}, scene camera is {cam_cfg.width}x{cam_cfg.height}")
         if options.realism.any and rng is None:
             raise ValueError("realism options need an rng")
-        spec = scene_to_spec(scene, shadows=options.shadows)
+        # Static bodies (no free joints or root welds): the same poses, a faster compile.
+        spec = scene_to_spec(scene, shadows=options.shadows, free_ids=set())
         spec.visual.map.znear = cam_cfg.znear / 1.0
         spec.visual.map.zfar = cam_cfg.zfar / 1.0
+        if not options.shadows:
+            spec.visual.quality.shadowsize = 0  # no shadow map: a cheaper render context
         model = spec.compile()
         # znear/zfar in MuJoCo are relative to the model extent; make them the configured metres.
         model.vis.map.znear = cam_cfg.znear / model.stat.extent
@@ -120,24 +126,60 @@ class SceneRenderer:
         r = self._bind(model)
         r.update_scene(data, CAMERA)
         rgb = r.render()
-        r.enable_depth_rendering()
-        depth = r.render()
-        r.enable_segmentation_rendering()
-        seg = r.render()
-        geom = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1)
+        object_id, geom, depth = self._render_ids_and_depth(r)
         inst_of_pixel = geom_instance[geom]  # -1 indexes the background entry
         labels_mushroom = (inst_of_pixel + 1).astype(np.uint16)
         labels_cap = np.where(cap_geom[geom], labels_mushroom, 0).astype(np.uint16)
 
         far = cam_cfg.zfar
-        depth = np.where((seg[..., 0] >= 0) & (depth < far * 0.999) & (depth > 0), depth, 0.0).astype(np.float32)
+        depth = np.where((object_id >= 0) & (depth < far * 0.999) & (depth > 0), depth, 0.0).astype(np.float32)
         if options.realism.depth_noise or options.realism.edge_holes:
             depth = apply_depth_realism(depth, intr.fy, cam_cfg.preset, options.realism, rng)
 
         amodal_caps = self._render_amodal(r, model, data, scene, cap_ids, pose, intr) if amodal else {}
-        r.disable_segmentation_rendering()
         return Frame(rgb, depth, labels_mushroom, labels_cap, amodal_caps, intr, pose,
                      cam_cfg.znear, cam_cfg.zfar, realism)
+
+    def _render_ids_and_depth(self, r: mujoco.Renderer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One segmentation render read back with its depth buffer (``mujoco.Renderer`` renders
+        depth and segmentation separately, with the same flags, so this saves a pass).
+
+        Returns per pixel the object id (-1 background), the geom id (-1 where no geom) and the
+        metric depth as ``mujoco.Renderer`` computes it (float32 metres, 0 beyond the far plane)."""
+        h, w = self.height, self.width
+        ctx, scene, model = r._mjr_context, r.scene, r.model
+        codes = np.empty((h, w, 3), dtype=np.uint8)
+        zbuf = np.empty((h, w), dtype=np.float32)
+        flags = scene.flags.copy()
+        try:
+            scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = True
+            scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = True
+            if r._gl_context:
+                r._gl_context.make_current()
+            rect = mujoco.MjrRect(0, 0, w, h)
+            mujoco.mjr_render(rect, scene, ctx)
+            mujoco.mjr_readPixels(codes, zbuf, rect, ctx)
+        finally:
+            np.copyto(scene.flags, flags)
+        # OpenGL rows run bottom to top. A pixel's colour encodes its mjvGeom's segid + 1.
+        codes, zbuf = codes[::-1], zbuf[::-1]
+        code = codes[..., 0].astype(np.int64) | (codes[..., 1].astype(np.int64) << 8) | (codes[..., 2].astype(np.int64) << 16)
+        geoms = scene.geoms[:scene.ngeom]
+        object_of_code = np.full(scene.ngeom + 1, -1, dtype=np.int64)
+        geom_of_code = np.full(scene.ngeom + 1, -1, dtype=np.int64)
+        for g in geoms:
+            if g.segid != -1:
+                object_of_code[g.segid + 1] = g.objid
+                if g.objtype == int(mujoco.mjtObj.mjOBJ_GEOM):
+                    geom_of_code[g.segid + 1] = g.objid
+        # Reversed-Z perspective depth to metres, in the float32 / float64 steps of
+        # ``mujoco.Renderer`` so the values are bit for bit the same.
+        near = np.float32(model.vis.map.znear * model.stat.extent)
+        far = np.float32(model.vis.map.zfar * model.stat.extent)
+        offset = np.float32(-0.5) * (-(far + near) / (far - near)) - np.float32(0.5)
+        scale = np.float32(-0.5) * (-(np.float32(2) * far * near) / (far - near))
+        depth = (scale / (zbuf.astype(np.float64) + offset)).astype(np.float32)
+        return object_of_code[code], geom_of_code[code], depth
 
     def _render_amodal(self, r: mujoco.Renderer, model: mujoco.MjModel, data: mujoco.MjData, scene: Scene,
                        cap_ids: dict[int, int], pose: np.ndarray, intr: Intrinsics) -> dict[int, np.ndarray]:
