@@ -15,6 +15,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 SUBCOMMAND_MODULES = (
     "generator.dataset.cli",
     "perception.cli_pose",
+    "perception.cli_detector",
     "sms3d_env.accuracy_study",
     "sms3d_env.training",
     "sms3d_env.demo",

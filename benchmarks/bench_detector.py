@@ -1,0 +1,75 @@
+"""Stage-1 and pipeline speed: Mask R-CNN inference per 640 x 480 image for both configurations,
+and the two-stage pipeline's time per scene (detector + pose network).
+
+Target (issue): under 1 s per image for the light configuration on this CPU. Times are medians
+over ``--repeats`` runs after a warm-up, eval mode, no_grad, on a rendered dataset scene. Network
+weights do not change the time much (random weights score few boxes, so ``--checkpoint`` should
+be a trained detector for the pipeline rows: the mask head runs once per detection).
+
+    python benchmarks/bench_detector.py --data runs/pose_scenes_heldout [--checkpoint best.pt]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import torch
+
+from generator.dataset.readers import read_scene_files
+from generator.dataset.writer import scene_dirname
+from perception.estimator import PoseEstimator
+from perception.eval_pipeline import run_scene, scene_indices
+from perception.maskrcnn import DetectorConfig, MaskRCNNDetector, build_maskrcnn
+from perception.pipeline import PosePipeline
+
+
+def median_ms(fn, repeats: int) -> float:
+    fn()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(1e3 * (time.perf_counter() - start))
+    return statistics.median(times)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--data", required=True, help="a dataset folder from `sms3d generate` (640 x 480)")
+    p.add_argument("--split", default="test")
+    p.add_argument("--checkpoint", help="a trained mobilenet_v3_fpn detector for the pipeline rows")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--repeats", type=int, default=5)
+    args = p.parse_args()
+    torch.set_num_threads(args.threads)
+    sample = read_scene_files(f"{args.data}/{scene_dirname(scene_indices(args.data, args.split)[0])}")
+    print(f"threads={torch.get_num_threads()} torch={torch.__version__} image={sample.rgb.shape[1]}x{sample.rgb.shape[0]}\n")
+
+    print("| detector | network input | params (M) | ms / image |")
+    print("|---|---|---:|---:|")
+    for arch, size in (("mobilenet_v3_fpn", (360, 480)), ("mobilenet_v3_fpn", (480, 640)), ("resnet50_fpn_v2", (480, 640))):
+        config = DetectorConfig(arch=arch, min_size=size[0], max_size=size[1])
+        detector = MaskRCNNDetector(build_maskrcnn(config), config)
+        params = sum(t.numel() for t in detector.model.parameters()) / 1e6
+        ms = median_ms(lambda d=detector: d.detect(sample.rgb), args.repeats)
+        print(f"| {arch} (random weights) | {size[1]} x {size[0]} | {params:.1f} | {ms:.0f} |")
+
+    estimator = PoseEstimator.from_pretrained()
+    rows = [("oracle masks", PosePipeline(estimator), True)]
+    if args.checkpoint:
+        rows.append((f"Mask R-CNN {args.checkpoint}", PosePipeline(estimator, MaskRCNNDetector.from_checkpoint(args.checkpoint)), False))
+    print("\n| pipeline | mushrooms estimated | ms / scene |")
+    print("|---|---:|---:|")
+    for name, pipeline, oracle in rows:
+        n = len(run_scene(pipeline, sample, oracle))
+        ms = median_ms(lambda pl=pipeline, o=oracle: run_scene(pl, sample, o), args.repeats)
+        print(f"| {name} | {n} | {ms:.0f} |")
+
+
+if __name__ == "__main__":
+    main()

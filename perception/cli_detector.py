@@ -1,0 +1,173 @@
+"""``sms3d train-detector`` / ``eval-detector`` / ``eval-pipeline`` / ``show-estimates``.
+
+``register(subparsers)`` adds the four subcommands to ``sms3d``; each reads a dataset written by
+``sms3d generate``. ``--detector`` is ``oracle`` (MuJoCo's segmentation masks) or a checkpoint
+written by ``train-detector``; ``--weights`` a pose-network checkpoint (default: the shipped one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import torch
+
+from perception.maskrcnn import ARCHITECTURES, CATEGORIES, DetectorConfig
+
+SPLITS = ("train", "val", "test")
+
+
+def _clear_errors(func):
+    """Typed input errors become one line on stderr and exit code 2, not a traceback."""
+    from generator.dataset.errors import CorruptFileError
+    from perception.errors import (
+        CheckpointFormatError,
+        CheckpointMismatchError,
+        PerceptionConfigError,
+    )
+    from perception.pipeline import PipelineInputError
+
+    def run(args: argparse.Namespace) -> int:
+        try:
+            return func(args)
+        except (PerceptionConfigError, CheckpointFormatError, CheckpointMismatchError, CorruptFileError,
+                PipelineInputError, FileNotFoundError, ImportError) as exc:
+            print(f"sms3d {args.command}: error: {exc}", file=sys.stderr)
+            return 2
+
+    return run
+
+
+def _pipeline(args: argparse.Namespace):
+    from perception.estimator import PoseEstimator
+    from perception.maskrcnn import MaskRCNNDetector
+    from perception.pipeline import PosePipeline
+
+    estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
+    oracle = args.detector == "oracle"
+    detector = None if oracle else MaskRCNNDetector.from_checkpoint(args.detector, score_threshold=args.score_threshold)
+    return PosePipeline(estimator, detector), oracle
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    from perception.train_detector import DetectorTrainConfig, train_detector
+
+    torch.set_num_threads(args.threads)
+    config = DetectorConfig(arch=args.arch, category=args.category, min_size=args.min_size, max_size=args.max_size)
+    train = DetectorTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
+                                max_images=args.max_images, pretrained=args.pretrained, augment=not args.no_augment)
+    log = train_detector(args.data, args.out, config, train, resume=not args.restart, device=args.device)
+    print(json.dumps(log[-1] if log else {}, indent=2))
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from perception.detector_eval import evaluate_detector
+    from perception.maskrcnn import MaskRCNNDetector
+
+    torch.set_num_threads(args.threads)
+    detector = MaskRCNNDetector.from_checkpoint(args.checkpoint, args.device, score_threshold=args.score_threshold)
+    report = evaluate_detector(detector, args.data, args.split, detector.config.category, args.min_area,
+                               args.score_threshold, args.max_images, progress=True)
+    print(report.markdown())
+    if args.out:
+        Path(args.out).write_text(json.dumps(report.to_dict(), indent=2), encoding="utf-8")
+    return 0
+
+
+def cmd_eval_pipeline(args: argparse.Namespace) -> int:
+    from perception.eval_pipeline import evaluate_pipeline
+
+    torch.set_num_threads(args.threads)
+    pipeline, oracle = _pipeline(args)
+    report = evaluate_pipeline(pipeline, args.data, args.split, oracle, args.min_area, args.max_scenes, progress=True)
+    print(report.markdown())
+    if args.out:
+        Path(args.out).write_text(json.dumps({"summary": report.summary(), "rows": report.rows}, indent=2), encoding="utf-8")
+    return 0
+
+
+def cmd_show(args: argparse.Namespace) -> int:
+    from generator.dataset.readers import read_scene_files
+    from generator.dataset.writer import scene_dirname
+    from perception.eval_pipeline import run_scene
+    from perception.show_estimates import estimates_figure
+
+    torch.set_num_threads(args.threads)
+    pipeline, oracle = _pipeline(args)
+    sample = read_scene_files(Path(args.data) / scene_dirname(args.scene))
+    estimates = run_scene(pipeline, sample, oracle)
+    out = estimates_figure(sample, estimates, args.out)
+    print(f"wrote {out} ({len(estimates)} estimates)")
+    return 0
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="dataset folder written by `sms3d generate`")
+    p.add_argument("--threads", type=int, default=max(1, torch.get_num_threads()), help="torch CPU threads")
+
+
+def _pipeline_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--detector", default="oracle", help="'oracle' (segmentation render) or a train-detector checkpoint")
+    p.add_argument("--weights", help="pose-network checkpoint (default: the shipped weights)")
+    p.add_argument("--score-threshold", type=float, default=0.5, help="detections below this score are dropped")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("train-detector", help="train Mask R-CNN on a dataset's COCO files (resumable)")
+    _common(p)
+    p.add_argument("--out", required=True, help="run folder: last.pt, best.pt, log.csv")
+    p.add_argument("--arch", choices=ARCHITECTURES, default="mobilenet_v3_fpn")
+    p.add_argument("--category", choices=tuple(CATEGORIES), default="mushroom")
+    p.add_argument("--epochs", type=int, default=20)
+    p.add_argument("--batch-size", type=int, default=2)
+    p.add_argument("--lr", type=float, default=3e-4)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--min-size", type=int, default=480, help="shorter image side the network sees")
+    p.add_argument("--max-size", type=int, default=640, help="longer image side the network sees")
+    p.add_argument("--max-images", type=int, help="use only the first N training images")
+    p.add_argument("--pretrained", action="store_true", help="start from torchvision weights already in the torch hub cache")
+    p.add_argument("--no-augment", action="store_true", help="no random flips")
+    p.add_argument("--restart", action="store_true", help="ignore an existing last.pt instead of resuming")
+    p.add_argument("--device", default="cpu")
+    p.set_defaults(func=_clear_errors(cmd_train))
+
+    p = subparsers.add_parser("eval-detector", help="COCO AP/AR and F1 (boxes and masks) of a detector on a split")
+    _common(p)
+    p.add_argument("--checkpoint", required=True, help="train-detector checkpoint (best.pt)")
+    p.add_argument("--split", choices=SPLITS, default="test")
+    p.add_argument("--min-area", type=int, default=16, help="ground-truth masks smaller than this are ignored")
+    p.add_argument("--score-threshold", type=float, default=0.5, help="score threshold for F1")
+    p.add_argument("--max-images", type=int)
+    p.add_argument("--out", help="also write the report as JSON here")
+    p.add_argument("--device", default="cpu")
+    p.set_defaults(func=_clear_errors(cmd_eval))
+
+    p = subparsers.add_parser("eval-pipeline", help="detection recall/precision and pose errors of the two-stage pipeline")
+    _common(p)
+    _pipeline_args(p)
+    p.add_argument("--split", choices=SPLITS, default="test")
+    p.add_argument("--min-area", type=int, default=16)
+    p.add_argument("--max-scenes", type=int)
+    p.add_argument("--out", help="also write summary and per-mushroom rows as JSON here")
+    p.set_defaults(func=_clear_errors(cmd_eval_pipeline))
+
+    p = subparsers.add_parser("show-estimates", help="PNG of estimated vs ground-truth cap boxes, on the image and in 3D")
+    _common(p)
+    _pipeline_args(p)
+    p.add_argument("--scene", type=int, default=0, help="scene index")
+    p.add_argument("--out", default="estimates.png")
+    p.set_defaults(func=_clear_errors(cmd_show))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m perception.cli_detector")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

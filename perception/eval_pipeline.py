@@ -1,0 +1,183 @@
+"""Evaluate the two-stage pipeline on held-out scenes of a generated dataset.
+
+Estimates are matched to ground-truth mushrooms by mask IoU (>= 0.5, greedily by score) against
+the visible whole-mushroom masks; masks under ``min_area`` pixels are not counted (as in
+``detector_eval``). Matched mushrooms get the stem-axis error (angle between the estimated and
+true stem axes) and the geodesic error of the full rotation; both are broken down by cap size,
+tilt and occlusion (the cap's visible fraction from the COCO annotations).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from generator.camera import Intrinsics
+from generator.dataset.readers import SceneSample, read_scene_files
+from generator.dataset.writer import scene_dirname
+from generator.geometry import tilt_angle
+from perception.detector import detections_from_labels
+from perception.detector_data import load_coco
+from perception.pipeline import MushroomEstimate, PosePipeline
+
+SIZE_BINS_MM = (0.0, 35.0, 50.0, 65.0, 200.0)
+TILT_BINS_DEG = (0.0, 10.0, 20.0, 30.0, 90.0)
+VISIBLE_BINS = (0.0, 0.5, 0.8, 0.95, 1.01)
+
+
+@dataclass(frozen=True)
+class GroundTruthMushroom:
+    scene_id: int
+    instance_id: int
+    mask: np.ndarray
+    rotation: np.ndarray
+    cap_diameter_mm: float
+    tilt_deg: float
+    visible_fraction: float
+
+
+@dataclass
+class PipelineReport:
+    """Per-mushroom rows (``matched``: ground truth with its errors, or NaN errors when missed)."""
+
+    scenes: int = 0
+    estimates: int = 0
+    seconds: float = 0.0
+    rows: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def ground_truth(self) -> int:
+        return len(self.rows)
+
+    @property
+    def matched(self) -> int:
+        return sum(r["matched"] for r in self.rows)
+
+    @property
+    def recall(self) -> float:
+        return self.matched / self.ground_truth if self.rows else 0.0
+
+    @property
+    def precision(self) -> float:
+        return self.matched / self.estimates if self.estimates else 0.0
+
+    def errors(self, key: str) -> np.ndarray:
+        return np.array([r[key] for r in self.rows if r["matched"]])
+
+    def summary(self) -> dict[str, Any]:
+        axis, geo = self.errors("axis_error_deg"), self.errors("geodesic_error_deg")
+        stat = lambda a: {"mean": float(a.mean()), "median": float(np.median(a)), "p90": float(np.percentile(a, 90))} if a.size else {}  # noqa: E731
+        return {"scenes": self.scenes, "ground_truth": self.ground_truth, "estimates": self.estimates,
+                "matched": self.matched, "recall": self.recall, "precision": self.precision,
+                "axis_error_deg": stat(axis), "geodesic_error_deg": stat(geo),
+                "seconds_per_scene": self.seconds / max(self.scenes, 1),
+                "by_cap_diameter_mm": self.breakdown("cap_diameter_mm", SIZE_BINS_MM),
+                "by_tilt_deg": self.breakdown("tilt_deg", TILT_BINS_DEG),
+                "by_visible_fraction": self.breakdown("visible_fraction", VISIBLE_BINS)}
+
+    def breakdown(self, key: str, edges: tuple[float, ...]) -> list[dict[str, Any]]:
+        """Recall and mean errors per bin of ``key`` (a ground-truth property)."""
+        out = []
+        for lo, hi in zip(edges[:-1], edges[1:]):
+            rows = [r for r in self.rows if lo <= r[key] < hi]
+            hit = [r for r in rows if r["matched"]]
+            out.append({"bin": [lo, hi], "n": len(rows), "recall": len(hit) / len(rows) if rows else None,
+                        "mean_axis_error_deg": float(np.mean([r["axis_error_deg"] for r in hit])) if hit else None,
+                        "mean_geodesic_error_deg": float(np.mean([r["geodesic_error_deg"] for r in hit])) if hit else None})
+        return out
+
+    def markdown(self) -> str:
+        s = self.summary()
+        lines = [f"{s['scenes']} scenes, {s['ground_truth']} mushrooms, {s['estimates']} estimates: "
+                 f"recall {s['recall']:.3f}, precision {s['precision']:.3f}, "
+                 f"{s['seconds_per_scene']:.2f} s per scene", ""]
+        if s["axis_error_deg"]:
+            lines += ["| error of matched mushrooms | mean ° | median ° | 90th pct ° |", "|---|---:|---:|---:|"]
+            for name in ("axis_error_deg", "geodesic_error_deg"):
+                e = s[name]
+                lines.append(f"| {name.replace('_deg', '').replace('_', ' ')} | {e['mean']:.1f} | {e['median']:.1f} | {e['p90']:.1f} |")
+        for title, key in (("cap diameter (mm)", "by_cap_diameter_mm"), ("tilt (°)", "by_tilt_deg"),
+                           ("visible cap fraction", "by_visible_fraction")):
+            lines += ["", f"| {title} | n | recall | mean axis ° | mean geodesic ° |", "|---|---:|---:|---:|---:|"]
+            for b in s[key]:
+                fmt = lambda v: "–" if v is None else f"{v:.1f}"  # noqa: E731
+                rec = "–" if b["recall"] is None else f"{b['recall']:.2f}"
+                lines.append(f"| {b['bin'][0]:g}–{b['bin'][1]:g} | {b['n']} | {rec} | "
+                             f"{fmt(b['mean_axis_error_deg'])} | {fmt(b['mean_geodesic_error_deg'])} |")
+        return "\n".join(lines) + "\n"
+
+
+def scene_intrinsics(sample: SceneSample) -> Intrinsics:
+    k = sample.record["camera"]["intrinsics"]
+    return Intrinsics(**{name: k[name] for name in ("width", "height", "fx", "fy", "cx", "cy")})
+
+
+def ground_truth(sample: SceneSample, min_area: int = 16) -> list[GroundTruthMushroom]:
+    """The scene's mushrooms with at least ``min_area`` visible pixels."""
+    visible = {a["instance_id"]: a.get("visible_fraction", 0.0) for a in sample.annotations if a["category_id"] == 2}
+    out = []
+    for inst in sample.record["instances"]:
+        mask = sample.labels_mushroom == inst["id"] + 1
+        if mask.sum() < min_area:
+            continue
+        rot = np.asarray(inst["rotation"], dtype=float)
+        out.append(GroundTruthMushroom(sample.index, inst["id"], mask, rot, 1000.0 * inst["cap_diameter"],
+                                       float(np.degrees(tilt_angle(rot))), float(visible.get(inst["id"], 0.0))))
+    return out
+
+
+def _angle_deg(cos: float) -> float:
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def match(estimates: list[MushroomEstimate], truth: list[GroundTruthMushroom], min_iou: float = 0.5) -> list[dict[str, Any]]:
+    """One row per ground-truth mushroom: matched (IoU >= ``min_iou``) with its errors, or missed."""
+    rows = [{"scene_id": g.scene_id, "instance_id": g.instance_id, "cap_diameter_mm": g.cap_diameter_mm,
+             "tilt_deg": g.tilt_deg, "visible_fraction": g.visible_fraction, "matched": False,
+             "iou": 0.0, "axis_error_deg": float("nan"), "geodesic_error_deg": float("nan")} for g in truth]
+    taken = np.zeros(len(truth), bool)
+    for est in sorted(estimates, key=lambda e: -e.detection.score):
+        m = est.detection.mask
+        ious = np.array([(m & g.mask).sum() / max((m | g.mask).sum(), 1) if not taken[j] else 0.0
+                         for j, g in enumerate(truth)])
+        if not truth or ious.max() < min_iou:
+            continue
+        j = int(ious.argmax())
+        taken[j] = True
+        g = truth[j]
+        rows[j].update(matched=True, iou=float(ious[j]),
+                       axis_error_deg=_angle_deg(est.stem_axis_world @ g.rotation[:, 2]),
+                       geodesic_error_deg=_angle_deg((np.trace(g.rotation.T @ est.rotation_world) - 1.0) / 2.0))
+    return rows
+
+
+def scene_indices(root: str | Path, split: str) -> list[int]:
+    return [im["scene_id"] for im in sorted(load_coco(root, split)["images"], key=lambda im: im["id"])]
+
+
+def run_scene(pipeline: PosePipeline, sample: SceneSample, oracle: bool) -> list[MushroomEstimate]:
+    detections = detections_from_labels(sample.labels_mushroom) if oracle else None
+    return pipeline(sample.rgb, sample.depth, scene_intrinsics(sample), sample.world_from_camera, detections)
+
+
+def evaluate_pipeline(pipeline: PosePipeline, root: str | Path, split: str = "test", oracle: bool = False,
+                      min_area: int = 16, max_scenes: int | None = None, progress: bool = False) -> PipelineReport:
+    """Run ``pipeline`` (its detector, or oracle masks) on the scenes of ``split`` and match."""
+    indices = scene_indices(root, split)[:max_scenes] if max_scenes else scene_indices(root, split)
+    if progress:
+        from tqdm import tqdm
+        indices = tqdm(indices, desc=f"eval-pipeline {split}", unit="scene")
+    report = PipelineReport()
+    for index in indices:
+        sample = read_scene_files(Path(root) / scene_dirname(index))
+        start = time.perf_counter()
+        estimates = run_scene(pipeline, sample, oracle)
+        report.seconds += time.perf_counter() - start
+        report.scenes += 1
+        report.estimates += len(estimates)
+        report.rows += match(estimates, ground_truth(sample, min_area))
+    return report
