@@ -8,6 +8,7 @@ with free joint ``mushroom_i_joint``, geoms ``mushroom_i_cap`` / ``mushroom_i_st
 
 from __future__ import annotations
 
+from functools import cache
 from pathlib import Path
 
 import cv2
@@ -15,8 +16,9 @@ import mujoco
 import numpy as np
 
 from generator.camera import camera_intrinsics, camera_rotation_mujoco
+from generator.config import Species
 from generator.files import write_atomic
-from generator.mushroom_models import COLOURS
+from generator.mushroom_models import COLOURS, model_library
 from generator.scene import Scene
 
 SOIL_TEXTURE = "soil.png"
@@ -37,6 +39,17 @@ def soil_texture(seed: int, size: int = 256) -> np.ndarray:
     grit = rng.random((size, size)) > 0.985
     rgb[grit] = np.array([0.75, 0.72, 0.66])
     return (rgb * 255).astype(np.uint8)
+
+
+@cache
+def _parts(species: Species, model_id: int) -> tuple[tuple[str, list[float], list[int], float, float], ...]:
+    """Cap and stem of a library model: name, flat vertex and face lists, part and total volume.
+    Cached: converting the meshes again for every instance dominated building a spec."""
+    model = model_library(species)[model_id]
+    meshes = {"cap": model.cap_mesh, "stem": model.stem_mesh}
+    total = sum(mesh.volume for mesh in meshes.values())
+    return tuple((part, np.asarray(mesh.vertices).ravel().tolist(), np.asarray(mesh.faces).ravel().tolist(),
+                  mesh.volume, total) for part, mesh in meshes.items())
 
 
 def _quat(rotation: np.ndarray) -> np.ndarray:
@@ -102,13 +115,10 @@ def scene_to_spec(scene: Scene, *, mushroom_collisions: bool = False, shadows: b
         free = free_ids is None or inst.id in free_ids
         if free:
             body.add_freejoint(name=f"{name}_joint")
-        part_volumes = {"cap": model.cap_mesh.volume, "stem": model.stem_mesh.volume}
-        total = sum(part_volumes.values())
-        for part, mesh in (("cap", model.cap_mesh), ("stem", model.stem_mesh)):
-            spec.add_mesh(name=f"{name}_{part}", uservert=np.asarray(mesh.vertices).ravel().tolist(),
-                          userface=np.asarray(mesh.faces).ravel().tolist(), scale=scale)
+        for part, vertices, faces, volume, total in _parts(inst.species, inst.model_id):
+            spec.add_mesh(name=f"{name}_{part}", uservert=vertices, userface=faces, scale=scale)
             body.add_geom(name=f"{name}_{part}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"{name}_{part}",
-                          material=f"{inst.species}_{part}", mass=inst.mass * part_volumes[part] / total,
+                          material=f"{inst.species}_{part}", mass=inst.mass * volume / total,
                           contype=contype, conaffinity=contype, condim=4, friction=[0.8, 0.01, 0.001])
         body.add_site(name=f"{name}_cap_top", pos=[0, 0, model.cap_top_z * scale[2]], size=[0.002, 0, 0], group=4)
         if not free:

@@ -9,8 +9,8 @@ diameter thick, caps about 0.55 of their diameter high, caps out of round by up 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import cache
+from dataclasses import dataclass, field
+from functools import cache, cached_property
 
 import numpy as np
 import trimesh
@@ -18,7 +18,7 @@ import trimesh
 from generator.config import Species
 
 MODELS_PER_SPECIES = 7
-_SEGMENTS = 32
+SEGMENTS = 32  # mesh segments around the stem axis
 
 # Mass from cap diameter D in mm, m = a * D**b grams (log-log fits of measured mushrooms).
 MASS_FIT = {"white": (1.464e-3, 2.500), "brown": (1.681e-3, 2.508)}
@@ -27,6 +27,16 @@ COLOURS = {
     "white": {"cap": (0.93, 0.91, 0.86, 1.0), "stem": (0.90, 0.88, 0.82, 1.0)},
     "brown": {"cap": (0.55, 0.38, 0.26, 1.0), "stem": (0.84, 0.78, 0.70, 1.0)},
 }
+
+
+@dataclass(frozen=True)
+class Revolution:
+    """How ``revolve`` made a part: its profile ``(r, z)`` from pole to pole and its out-of-round
+    amplitude and phase (the mesh has ``SEGMENTS`` segments)."""
+
+    profile: np.ndarray
+    out_of_round: float
+    phase: float
 
 
 @dataclass(frozen=True)
@@ -40,6 +50,8 @@ class MushroomModel:
     stem_mesh: trimesh.Trimesh  # stem alone, watertight
     cap_diameter: float  # m, mean of the cap's largest and smallest diameters
     cap_bottom_z: float  # m, height of the cap rim above the stem base
+    # Cap and stem as solids of revolution (procedural models); empty for scanned meshes.
+    revolutions: tuple[Revolution, ...] = field(default=(), compare=False, repr=False)
 
     @property
     def name(self) -> str:
@@ -53,18 +65,21 @@ class MushroomModel:
     def stem_axis(self) -> np.ndarray:
         return np.array([0.0, 0.0, 1.0])
 
-    @property
+    # Cached: every placement attempt reads them, and trimesh re-hashes a mesh on each access.
+    @cached_property
     def cap_top_z(self) -> float:
         return float(self.cap_mesh.vertices[:, 2].max())
 
-    @property
+    @cached_property
     def cap_box(self) -> tuple[np.ndarray, np.ndarray]:
-        """Centre and edge lengths of the cap's box, axis-aligned in the model frame."""
+        """Centre and edge lengths of the cap's box, axis-aligned in the model frame (read-only)."""
         lo, hi = self.cap_mesh.bounds
-        return (lo + hi) / 2.0, hi - lo
+        centre, size = (lo + hi) / 2.0, hi - lo
+        centre.flags.writeable = size.flags.writeable = False
+        return centre, size
 
 
-def revolve(profile: np.ndarray, out_of_round: float, phase: float, segments: int = _SEGMENTS) -> trimesh.Trimesh:
+def revolve(profile: np.ndarray, out_of_round: float, phase: float, segments: int = SEGMENTS) -> trimesh.Trimesh:
     """A watertight solid of revolution about +z from a profile ``(r, z)`` running from the bottom
     pole (r = 0) to the top pole (r = 0); the radius is scaled by ``1 + e cos(2 (phi - phase))``."""
     if profile[0, 0] != 0 or profile[-1, 0] != 0:
@@ -126,13 +141,14 @@ def build_model(species: Species, model_id: int, rng: np.random.Generator) -> Mu
     gill_depth = cap_height * 0.25
     out_of_round = rng.uniform(0.0, 0.05) if species == "white" else rng.uniform(0.0, 0.07)
     phase = rng.uniform(0, np.pi)
-    cap = revolve(_cap_profile(radius, cap_height, rim_z, stem_radius, gill_depth), out_of_round, phase)
-    # The stem reaches into the cap so the union is one connected solid.
-    stem = revolve(_stem_profile(stem_radius, rim_z + gill_depth * 1.5), out_of_round / 2, phase)
+    parts = (Revolution(_cap_profile(radius, cap_height, rim_z, stem_radius, gill_depth), out_of_round, phase),
+             # The stem reaches into the cap so the union is one connected solid.
+             Revolution(_stem_profile(stem_radius, rim_z + gill_depth * 1.5), out_of_round / 2, phase))
+    cap, stem = (revolve(part.profile, part.out_of_round, part.phase) for part in parts)
     whole = trimesh.boolean.union([cap, stem], engine="manifold")
     if not (cap.is_watertight and stem.is_watertight and whole.is_watertight):
         raise RuntimeError(f"procedural model {species}_{model_id} is not watertight")
-    return MushroomModel(species, model_id, whole, cap, stem, diameter, rim_z)
+    return MushroomModel(species, model_id, whole, cap, stem, diameter, rim_z, parts)
 
 
 @cache

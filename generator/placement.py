@@ -4,71 +4,34 @@ For each requested mushroom, up to ``max_attempts`` times: pick a model, sample 
 roll/pitch ~ N(0, sigma^2), yaw ~ U[0, 2 pi), ``R = Rz Ry Rx``, uniform scale and per-axis
 stretch; set the stem base on the soil; reject when the intersection-over-union with one of the
 ``neighbours`` nearest placed mushrooms whose bounding spheres touch it exceeds ``overlap_iou``.
-Intersection volumes are exact mesh booleans (manifold3d).
+Intersection volumes are exact mesh booleans (manifold3d), spared where certain bounds already
+decide (``generator.overlap``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cache
 
-import manifold3d
 import numpy as np
 
 from generator.config import PlacementConfig, Species
 from generator.geometry import OrientedBox, rotation_xyz
 from generator.mushroom_models import MushroomModel, model_library, mushroom_mass
+from generator.overlap import OverlapCounts, Posed, exceeds_iou, model_solid
 from generator.scene import MushroomInstance
 from generator.terrain import Terrain
 
 
 @dataclass(frozen=True)
-class _Solid:
-    """A model as a manifold with its bounding sphere (model frame) and volume."""
-
-    manifold: manifold3d.Manifold
-    centre: np.ndarray
-    radius: float
-    volume: float
-
-
-@cache
-def _solid(species: Species, model_id: int) -> _Solid:
-    mesh = model_library(species)[model_id].mesh
-    solid = manifold3d.Manifold(manifold3d.Mesh(
-        vert_properties=np.asarray(mesh.vertices, dtype=np.float32),
-        tri_verts=np.asarray(mesh.faces, dtype=np.uint32),
-    ))
-    lo, hi = mesh.bounds
-    centre = (lo + hi) / 2
-    radius = float(np.linalg.norm(mesh.vertices - centre, axis=1).max())
-    return _Solid(solid, centre, radius, float(solid.volume()))
-
-
-@dataclass
-class _Placed:
-    instance: MushroomInstance
-    solid: manifold3d.Manifold  # transformed into the world
-    centre: np.ndarray
-    radius: float
-    volume: float
-
-
-@dataclass(frozen=True)
 class PlacementStats:
-    """How placement went: ``placed`` of ``requested`` after ``attempts`` tries in total."""
+    """How placement went: ``placed`` of ``requested`` after ``attempts`` tries in total, with
+    ``mesh_tests`` exact booleans and ``bound_tests`` proxy booleans."""
 
     requested: int
     placed: int
     attempts: int
     mesh_tests: int
-
-
-def intersection_iou(a: manifold3d.Manifold, b: manifold3d.Manifold, volume_a: float, volume_b: float) -> float:
-    """Volume IoU of two solids from an exact boolean intersection."""
-    inter = (a ^ b).volume()
-    union = volume_a + volume_b - inter
-    return float(inter / union) if union > 0 else 0.0
+    bound_tests: int = 0
 
 
 def make_instance(
@@ -101,8 +64,11 @@ def place_mushrooms(
 ) -> tuple[list[MushroomInstance], PlacementStats]:
     """Run Algorithm 1; always terminates after at most ``num_mushrooms * max_attempts`` tries."""
     species_pool: tuple[Species, ...] = ("white", "brown") if config.species == "mixed" else (config.species,)
-    placed: list[_Placed] = []
-    attempts = mesh_tests = 0
+    placed: list[tuple[MushroomInstance, Posed]] = []
+    centres = np.empty((config.num_mushrooms, 3))
+    radii = np.empty(config.num_mushrooms)
+    attempts = 0
+    counts = OverlapCounts()
     for _ in range(config.num_mushrooms):
         for _attempt in range(config.max_attempts):
             attempts += 1
@@ -118,27 +84,20 @@ def place_mushrooms(
             stem_base = np.array([x, y, terrain.height_at(x, y)])
             model = model_library(species)[model_id]
             candidate = make_instance(len(placed), model, stem_base, rotation, scale, stretch, config.insertion_depth)
+            posed = Posed.place(model_solid(species, model_id), candidate.transform, candidate.scale_vector)
 
-            solid = _solid(species, model_id)
-            affine = candidate.transform
-            centre = affine[:3, :3] @ solid.centre + affine[:3, 3]
-            radius = solid.radius * float(candidate.scale_vector.max())
-            touching = [p for p in placed if np.linalg.norm(p.centre - centre) < p.radius + radius]
-            touching.sort(key=lambda p: float(np.linalg.norm(p.instance.stem_base - stem_base)))
-            overlap = False
-            world_solid = None
-            if touching:
-                world_solid = solid.manifold.transform(affine[:3].astype(np.float64))
-                volume = solid.volume * float(np.prod(candidate.scale_vector))
-                for other in touching[: config.neighbours]:
-                    mesh_tests += 1
-                    if intersection_iou(world_solid, other.solid, volume, other.volume) > config.overlap_iou:
-                        overlap = True
-                        break
-            if not overlap:
-                if world_solid is None:
-                    world_solid = solid.manifold.transform(affine[:3].astype(np.float64))
-                placed.append(_Placed(candidate, world_solid, centre, radius, solid.volume * float(np.prod(candidate.scale_vector))))
+            # Bounding spheres that touch: a vectorised pass with a little slack, then the scalar
+            # test on the few left, so exactly the same neighbours are chosen as one by one.
+            n = len(placed)
+            gaps = np.sqrt(((centres[:n] - posed.centre) ** 2).sum(axis=1))
+            near = np.flatnonzero(gaps < (radii[:n] + posed.radius) * (1 + 1e-9))
+            touching = [placed[i] for i in near
+                        if np.linalg.norm(placed[i][1].centre - posed.centre) < placed[i][1].radius + posed.radius]
+            touching.sort(key=lambda p: float(np.linalg.norm(p[0].stem_base - stem_base)))
+            neighbours = [p[1] for p in touching[: config.neighbours]]
+            if not exceeds_iou(posed, neighbours, config.overlap_iou, counts):
+                centres[n], radii[n] = posed.centre, posed.radius
+                placed.append((candidate, posed))
                 break
-    stats = PlacementStats(config.num_mushrooms, len(placed), attempts, mesh_tests)
-    return [p.instance for p in placed], stats
+    stats = PlacementStats(config.num_mushrooms, len(placed), attempts, counts.exact, counts.bounds)
+    return [p[0] for p in placed], stats

@@ -95,3 +95,41 @@ def test_models_are_watertight_and_shaped():
             assert model.cap_bottom_z < model.cap_top_z
             stem_r = np.linalg.norm(model.stem_mesh.vertices[:, :2], axis=1).max()
             assert 0.25 < 2 * stem_r / model.cap_diameter < 0.5  # stem a third of the cap across
+
+
+def test_proxies_bracket_every_model():
+    from generator.overlap import model_solid
+
+    for species in ("white", "brown"):
+        for model_id in range(len(model_library(species))):
+            solid = model_solid(species, model_id)
+            assert solid.inner is not None and solid.outer is not None
+            assert (solid.inner - solid.exact).volume() == 0.0
+            assert (solid.exact - solid.outer).volume() == 0.0
+            assert 0.6 < solid.inner.volume() / solid.volume < 1 < solid.outer.volume() / solid.volume < 1.6
+
+
+def test_bounded_overlap_test_decides_as_the_exact_booleans():
+    """Random pairs across the depths where each bound is used, many near tau."""
+    from generator.geometry import rotation_xyz
+    from generator.overlap import OverlapCounts, Posed, exceeds_iou, intersection_iou, model_solid
+
+    rng = np.random.default_rng(3)
+    counts = OverlapCounts()
+    outcomes = set()
+    for _ in range(160):
+        posed = []
+        for _ in range(2):
+            species = ("white", "brown")[int(rng.integers(2))]
+            t = np.eye(4)
+            scale = rng.uniform(0.8, 2.0) * rng.uniform(0.9, 1.1, 3)
+            t[:3, :3] = rotation_xyz(*rng.normal(0, 0.35, 2), rng.uniform(0, 2 * np.pi)) * scale
+            t[:2, 3] = rng.uniform(-0.035, 0.035, 2)
+            posed.append(Posed.place(model_solid(species, int(rng.integers(7))), t, scale))
+        a, b = posed
+        tau = float(rng.choice([0.0, 0.01, 0.05, 0.2]))
+        exact = intersection_iou(a.manifold("exact"), b.manifold("exact"), a.volume, b.volume) > tau
+        assert exceeds_iou(a, [b], tau, counts) == exact
+        outcomes.add(exact)
+    assert outcomes == {True, False}
+    assert counts.bounds > 0 and counts.exact < 160  # the bounds did decide some pairs
