@@ -211,7 +211,6 @@ class SceneRenderer:
         masks: dict[int, np.ndarray] = {}
         ctx, mjv_scene = r._mjr_context, r.scene
         full = mujoco.MjrRect(0, 0, w, h)
-        buf = np.empty((h, w, 3), dtype=np.uint8)
         try:
             for members in groups:
                 model.geom_group[:] = _HIDDEN_GROUP
@@ -224,12 +223,14 @@ class SceneRenderer:
                 if r._gl_context:
                     r._gl_context.make_current()
                 mujoco.mjr_render(full, mjv_scene, ctx)
-                # One read-back per pass (each read resolves the multisampled buffer); rows
-                # of OpenGL images run bottom to top.
-                mujoco.mjr_readPixels(buf, None, full, ctx)
+                # Read back each cap's rectangle only: resolving and reading the whole
+                # multisampled frame costs more than drawing a few caps. Rows of OpenGL images
+                # run bottom to top.
                 for iid in members:
                     u0, v0, u1, v1 = rects[iid]
-                    code = buf[h - v1:h - v0, u0:u1][::-1].astype(np.int32)
+                    buf = np.empty((v1 - v0, u1 - u0, 3), dtype=np.uint8)
+                    mujoco.mjr_readPixels(buf, None, mujoco.MjrRect(u0, h - v1, u1 - u0, v1 - v0), ctx)
+                    code = buf[::-1].astype(np.int32)
                     code = code[..., 0] + (code[..., 1] << 8) + (code[..., 2] << 16)
                     crop = code == segid[cap_ids[iid]]
                     if crop.any():
