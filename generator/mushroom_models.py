@@ -82,6 +82,15 @@ class MushroomModel:
 def revolve(profile: np.ndarray, out_of_round: float, phase: float, segments: int = SEGMENTS) -> trimesh.Trimesh:
     """A watertight solid of revolution about +z from a profile ``(r, z)`` running from the bottom
     pole (r = 0) to the top pole (r = 0); the radius is scaled by ``1 + e cos(2 (phi - phase))``."""
+    mesh = trimesh.Trimesh(*revolution_arrays(profile, out_of_round, phase, segments), process=True)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+def revolution_arrays(profile: np.ndarray, out_of_round: float, phase: float,
+                      segments: int = SEGMENTS) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and triangles of ``revolve``'s solid, before any orientation fix."""
     if profile[0, 0] != 0 or profile[-1, 0] != 0:
         raise ValueError("profile must start and end on the axis (r = 0)")
     phi = np.linspace(0, 2 * np.pi, segments, endpoint=False)
@@ -106,10 +115,7 @@ def revolve(profile: np.ndarray, out_of_round: float, phase: float, segments: in
         faces.append(np.stack([a, d, c], 1))
     last = 1 + (n_rings - 1) * segments
     faces.append(np.stack([last + seg, last + nxt, np.full(segments, top)], 1))
-    mesh = trimesh.Trimesh(vertices, np.vstack(faces), process=True)
-    if mesh.volume < 0:
-        mesh.invert()
-    return mesh
+    return vertices, np.vstack(faces)
 
 
 def _cap_profile(radius: float, height: float, rim_z: float, stem_radius: float, gill_depth: float) -> np.ndarray:

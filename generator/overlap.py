@@ -20,7 +20,7 @@ import manifold3d
 import numpy as np
 
 from generator.config import Species
-from generator.mushroom_models import SEGMENTS, MushroomModel, model_library, revolve
+from generator.mushroom_models import SEGMENTS, MushroomModel, model_library, revolution_arrays
 
 PROXY_SEGMENTS = 8  # divides SEGMENTS: proxy vertices share the model's angles
 # Depth (centre distance / radius sum) below which the inner proxies are tried first, and at or
@@ -34,8 +34,13 @@ _SAFETY = 1e-9
 
 
 def _mesh_to_manifold(vertices: np.ndarray, faces: np.ndarray) -> manifold3d.Manifold:
-    return manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(vertices, dtype=np.float32),
-                                               tri_verts=np.asarray(faces, dtype=np.uint32)))
+    """A manifold of a closed triangle mesh (float32 vertices), turned outward if it faces in."""
+    vertices = np.asarray(vertices, dtype=np.float32)
+    faces = np.asarray(faces, dtype=np.uint32)
+    a, b, c = (vertices[faces[:, k]].astype(np.float64) for k in range(3))
+    if np.einsum("ij,ij->", a, np.cross(b, c)) < 0:  # six times the signed volume
+        faces = faces[:, ::-1]
+    return manifold3d.Manifold(manifold3d.Mesh(vert_properties=vertices, tri_verts=np.ascontiguousarray(faces)))
 
 
 def _offset_profile(profile: np.ndarray, delta: float, z_min: float) -> np.ndarray | None:
@@ -98,8 +103,7 @@ def _proxy(model: MushroomModel, exact: manifold3d.Manifold, outer: bool) -> man
         for outline, part in outlines:
             if outer:
                 outline = outline * [widen, 1.0]
-            mesh = revolve(outline, part.out_of_round, part.phase, PROXY_SEGMENTS)
-            parts.append(_mesh_to_manifold(mesh.vertices, mesh.faces))
+            parts.append(_mesh_to_manifold(*revolution_arrays(outline, part.out_of_round, part.phase, PROXY_SEGMENTS)))
         proxy = parts[0] + parts[1]
         outside = (exact - proxy) if outer else (proxy - exact)
         if outside.volume() == 0.0:
