@@ -11,8 +11,8 @@ from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.physics import PickPhysicsParams
 from sms3d_env.pick_env import FAILURE_CAUSES, SMS3DPickEnv
 from sms3d_env.pose_source import NoisyPose, OraclePose, PoseEstimate, PoseSource, make_pose_source
-from sms3d_env.robot import RobotConfig
-from sms3d_env.scripted_picker import ScriptedPicker, run_episode
+from sms3d_env.robot import TOOLS, RobotConfig
+from sms3d_env.scripted_picker import HandPicker, ScriptedPicker, run_episode
 
 for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
                  ("SMS3DPickSparse-v0", {"reward_type": "sparse"})):
@@ -21,7 +21,7 @@ for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
                  kwargs=_kw)
 
 __all__ = [
-    "FAILURE_CAUSES", "ControllerConfig", "IKController", "NoisyPose", "OraclePose",
+    "FAILURE_CAUSES", "ControllerConfig", "HandPicker", "IKController", "NoisyPose", "OraclePose",
     "PickPhysicsParams", "PoseEstimate", "PoseSource", "RobotConfig", "SMS3DPickEnv",
-    "ScriptedPicker", "make_pose_source", "run_episode",
+    "ScriptedPicker", "TOOLS", "make_pose_source", "run_episode",
 ]

@@ -22,6 +22,11 @@ ROOTED_CONTYPE, ROOTED_CONAFFINITY = 4, 2  # touch the robot only
 # at detachment throws the pair apart with 10 N. Neighbours are still disturbed by the tool.
 FREE_CONTYPE, FREE_CONAFFINITY = 4, 2
 LIFTED_CONAFFINITY = 1 | 2
+# Hand only: a static "socket" under each free mushroom's stem base holds it from below once it
+# is detached (bit 16 on the socket, in the detached mushroom's conaffinity). A stem starts sunk
+# 2-9 mm into the soil, so soil contacts wait for the lift; the suction cup holds a detached
+# mushroom by its seal, but fingers closing on a cap detach it before they hold it.
+SOCKET_CONTYPE = SOCKET_CONAFFINITY = 16
 SOIL_CLEARANCE = 0.005  # m a detached mushroom must rise before it collides with the soil
 
 

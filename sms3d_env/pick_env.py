@@ -1,16 +1,17 @@
-"""``SMS3DPick-v0``: pick one mushroom from a synthetic bed with a suction tool on a Kinova Jaco.
+"""``SMS3DPick-v0``: pick one mushroom from a synthetic bed with a Kinova Jaco, by a suction
+tool (default) or the Jaco 3-finger hand.
 
-Per reset: a seeded scene (or one from a list) becomes an ``MjSpec``; the arm is attached, one
-inactive grip weld per mushroom is added, and the target is chosen. Per step: the normalised
-action becomes a tool twist, mink turns it into joint targets, and ``substeps`` physics steps run
-with the picking model of ``physics.py`` checked after each.
+Per reset: a seeded scene (or one from a list) becomes an ``MjSpec``; the arm is attached (with
+the suction tool: one inactive grip weld per free mushroom), and the target is chosen. Per step:
+the normalised action becomes a tool twist, mink turns it into joint targets, and ``substeps``
+physics steps run with the picking model of ``physics.py`` checked after each.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import gymnasium as gym
@@ -20,6 +21,7 @@ from gymnasium import spaces
 
 from sms3d_env import physics as ph
 from sms3d_env.controller import ControllerConfig, IKController
+from sms3d_env.hand import HandGrasp, add_stem_sockets
 from sms3d_env.physics import PickPhysicsParams
 from sms3d_env.pose_source import PoseEstimate, PoseSource, make_pose_source
 from sms3d_env.rewards import REWARD_TYPES, RewardState, compute_reward
@@ -29,6 +31,7 @@ from sms3d_env.robot import (
     CUP_GEOM,
     PREFIX,
     TOOL_SITE,
+    TOOLS,
     RobotConfig,
     attach_robot,
 )
@@ -52,10 +55,13 @@ class _EpisodeState:
     reachable: bool = True
     estimate: PoseEstimate | None = None
     target_pose: np.ndarray = field(default_factory=lambda: np.zeros(6))  # estimate: cap top, axis
-    grip: int = -1  # mushroom id held by the cup, -1 if none
-    grip_util: float = 0.0
-    suction_on: bool = False
-    ever_sealed_target: bool = False
+    grip: int = -1  # mushroom id held (sealed by the cup, or pinched by the fingers), -1 if none
+    grip_util: float = 0.0  # suction: seal load as a fraction of its capacity
+    finger_force: float = 0.0  # hand: finger normal force on the target (N)
+    tool_on: bool = False  # suction on, or hand commanded more closed than half
+    ever_gripped_target: bool = False
+    held_detached: bool = False  # hand: the target was held after its detachment
+    finger_touch_step: int = -1  # hand: last env step in which a finger touched the target
     target_detached: bool = False
     grip_lost: bool = False
     bruised: set[int] = field(default_factory=set)
@@ -66,7 +72,15 @@ class _EpisodeState:
 
 
 class SMS3DPickEnv(gym.Env):
-    """Gymnasium environment for suction picking of one target mushroom.
+    """Gymnasium environment for picking one target mushroom with a suction cup or a hand.
+
+    Action: tool twist (3 linear, 3 angular, normalised) and a tool command: suction on if > 0;
+    for the hand, the fingers' position target from -1 (open) to +1 (closed). Observation
+    ``suction``: suction (on, sealed, seal load / capacity); hand (measured closure 0-1, holding
+    the target or another mushroom with at least two fingers, finger normal force on the target
+    in N). The hand grips by contact friction only; success needs the target detached, lifted and
+    held with the hand closed (command > 0). ``failure_cause`` ``"no_seal"`` then means that the
+    hand never held the target.
 
     Args:
         render_mode: ``"rgb_array"`` or ``"depth_array"`` (metric depth in metres).
@@ -84,6 +98,7 @@ class SMS3DPickEnv(gym.Env):
             others are static bodies, which makes the simulation several times faster. ``None``:
             every mushroom is free.
         reward_type: ``"dense"`` or ``"sparse"``.
+        tool: ``"suction"`` or ``"hand"``; overrides ``robot.tool`` (default: ``"suction"``).
         control_dt, substeps: control period (s) and physics steps per control step.
         image_obs: add ``rgb`` (uint8) and ``depth`` (float32, m) of ``image_size`` to the
             observation, from ``camera``.
@@ -113,6 +128,7 @@ class SMS3DPickEnv(gym.Env):
         render_size: tuple[int, int] = (480, 640),
         max_tilt_deg: float = 45.0,
         free_radius: float | None = 0.10,
+        tool: str | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
@@ -122,9 +138,12 @@ class SMS3DPickEnv(gym.Env):
             raise ValueError(f"control_dt must be > 0, got {control_dt!r}")
         if not isinstance(substeps, int) or substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
+        if tool is not None and tool not in TOOLS:
+            raise ValueError(f"tool must be one of {TOOLS}, got {tool!r}")
         self.robot_cfg = robot or RobotConfig()
-        if self.robot_cfg.tool != "suction":
-            raise ValueError("SMS3DPick-v0 models suction picking only: RobotConfig.tool must be 'suction'")
+        if tool is not None:
+            self.robot_cfg = replace(self.robot_cfg, tool=tool)
+        self.tool = self.robot_cfg.tool
         if scenes is not None and len(scenes) == 0:
             raise ValueError("scenes must be a non-empty sequence")
         self.render_mode = render_mode
@@ -160,6 +179,7 @@ class SMS3DPickEnv(gym.Env):
             obs["depth"] = spaces.Box(0.0, inf, (h, w, 1), np.float32)
         self.observation_space = spaces.Dict(obs)
         self.model: mujoco.MjModel | None = None
+        self.hand: HandGrasp | None = None
         self.data: mujoco.MjData | None = None
         self.scene: Any = None
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
@@ -192,10 +212,22 @@ class SMS3DPickEnv(gym.Env):
         self.free_ids = np.array(sorted(free))
         spec = scene_to_spec(scene, free_ids=free)
         attach_robot(spec, self.robot_cfg)
-        for i in sorted(free):
-            spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
-                              objtype=mujoco.mjtObj.mjOBJ_BODY, name1=PREFIX + CUP_BODY,
-                              name2=f"mushroom_{i}", active=False)
+        suction = self.tool == "suction"
+        if suction:
+            for i in sorted(free):
+                spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
+                                  objtype=mujoco.mjtObj.mjOBJ_BODY, name1=PREFIX + CUP_BODY,
+                                  name2=f"mushroom_{i}", active=False)
+        else:
+            add_stem_sockets(spec, scene, sorted(free))
+            # Friction grasps creep out of MuJoCo's default pyramidal cone (impratio 1): lifted
+            # mushrooms slid out of the closed fingers. The elliptic cone with impratio 10 (MuJoCo's
+            # remedy for slip) keeps them (benchmarks/RESULTS.md). Hand only: the suction model
+            # stays as its accuracy study measured it.
+            spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+            spec.option.impratio = 10.0
+        socket = 0 if suction else ph.SOCKET_CONAFFINITY
+        self._free_aff, self._lifted_aff = ph.FREE_CONAFFINITY | socket, ph.LIFTED_CONAFFINITY | socket
         spec.worldbody.add_camera(name="side", pos=[0.0, -0.42, 0.28],
                                   xyaxes=[1, 0, 0, 0, 0.6, 0.8], fovy=50)
         spec.option.timestep = self.control_dt / self.substeps
@@ -217,7 +249,8 @@ class SMS3DPickEnv(gym.Env):
         self.cap_top_sites = np.array([m.site(f"mushroom_{i}_cap_top").id for i in range(n)])
         self.root_eq = np.array([m.equality(f"mushroom_{i}_root").id if i in free else -1
                                  for i in range(n)])
-        self.grip_eq = np.array([m.equality(f"grip_{i}").id if i in free else -1 for i in range(n)])
+        self.grip_eq = np.array([m.equality(f"grip_{i}").id if suction and i in free else -1
+                                 for i in range(n)])
         self.is_root_eq = np.zeros(m.neq, bool)
         self.is_root_eq[self.root_eq[self.root_eq >= 0]] = True
         self.geom_mushroom = np.full(m.ngeom, -1)
@@ -240,9 +273,14 @@ class SMS3DPickEnv(gym.Env):
         m.body_conaffinity[0] |= ph.SOIL_CONAFFINITY
         self.robot_geom = np.zeros(m.ngeom, bool)
         self.robot_geom[[g for g in range(m.ngeom) if m.geom(g).name.startswith(PREFIX)]] = True
-        self.cup_geom = m.geom(PREFIX + CUP_GEOM).id
-        self._cup_mask = (int(m.geom_contype[self.cup_geom]), int(m.geom_conaffinity[self.cup_geom]))
-        self.cup_body = m.body(PREFIX + CUP_BODY).id
+        if suction:
+            self.cup_geom = m.geom(PREFIX + CUP_GEOM).id
+            self._cup_mask = (int(m.geom_contype[self.cup_geom]), int(m.geom_conaffinity[self.cup_geom]))
+            self.cup_body = m.body(PREFIX + CUP_BODY).id
+            self.hand = None
+        else:
+            self.cup_geom = -1  # no geom id: the seal test never fires
+            self.hand = HandGrasp(m)
         self.tool_site = m.site(PREFIX + TOOL_SITE).id
         self.arm_qadr = np.array([m.jnt_qposadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS])
         self.arm_dadr = np.array([m.jnt_dofadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS])
@@ -271,6 +309,8 @@ class SMS3DPickEnv(gym.Env):
         self._ep = ep
         d.qpos[self.arm_qadr] = self.home_q
         d.ctrl[:6] = self.home_q
+        if self.hand is not None:
+            self.hand.open(d)
         # Posture target of the IK: the arm's configuration at a pre-grasp pose above the
         # *estimated* target (the pose the policy sees). Home holds the cup pointing down near the
         # Jaco's wrist singularity (joint 5 ~ 0, joints 4 and 6 aligned); a posture target at home
@@ -295,22 +335,28 @@ class SMS3DPickEnv(gym.Env):
             raise ValueError(f"action contains NaN or inf: {a.tolist()}")
         a = a.clip(-1.0, 1.0)
         m, d, ep = self.model, self.data, self._ep
-        ep.suction_on = bool(a[6] > 0)
-        if not ep.suction_on and ep.grip >= 0:
+        ep.tool_on = bool(a[6] > 0)
+        if self.hand is not None:
+            self.hand.command(d, float(a[6]))
+        elif not ep.tool_on and ep.grip >= 0:
             self._release()
         try:
             d.ctrl[:6] = self.ik.step(a[:6] * self._twist_scale, d.qpos[self.arm_qadr])
         except Exception:  # mink raises when the QP has no solution: hold the last command
             pass
         badqacc = d.warning[_BADQACC]
+        # The hand's grip is read from each physics step's contacts, also when there are none.
+        every = self.hand is not None
         for _ in range(self.substeps):
             mujoco.mj_step(m, d)
-            if d.ncon > 0 or ep.grip >= 0:
+            if every or d.ncon > 0 or ep.grip >= 0:
                 if badqacc.number > 0:
                     break
                 self._picking_physics()
         if badqacc.number > 0 or not np.isfinite(d.qpos).all():
             ep.unstable = True
+        if ep.held_detached and ep.finger_touch_step < self.steps:
+            ep.grip_lost = True  # hand: the detached target left the fingers for a whole step
         self.steps += 1
         self._update_neighbours()
         success = self._success()
@@ -343,20 +389,37 @@ class SMS3DPickEnv(gym.Env):
                         continue
                     if self.robot_geom[other]:
                         touched.add(int(k))
+                        if self.hand is not None:
+                            self.hand.add(int(other), int(k), fn)
                     if self.is_cap[g] and fn > p.bruise_force:
                         ep.bruised.add(int(k))
-                    if (other == self.cup_geom and self.is_cap[g] and ep.suction_on
+                    if (other == self.cup_geom and self.is_cap[g] and ep.tool_on
                             and ep.grip < 0 and fn >= p.seal_force and self.grip_eq[k] >= 0):
                         normal = d.contact.frame[c][:3] * (1.0 if g1 == self.cup_geom else -1.0)
                         if self._seals(int(k), d.contact.pos[c], normal):
                             self._grip(int(k), d.contact.pos[c].copy())
+        if self.hand is not None:
+            self._hand_grip()
         if ep.grip >= 0:
             touched.add(ep.grip)
         rooted = [k for k in touched if self.root_eq[k] >= 0 and d.eq_active[self.root_eq[k]]]
         if rooted:
             self._check_roots(rooted)
-        if ep.grip >= 0:
+        if ep.grip >= 0 and self.hand is None:
             self._check_grip()
+
+    def _hand_grip(self) -> None:
+        """Hand: what the fingers hold after this physics step (held = at least two fingers on
+        it while the hand is commanded closed), then forget the step's contacts."""
+        ep, hand = self._ep, self.hand
+        ep.grip = hand.held(ep.target) if ep.tool_on else -1
+        ep.finger_force = hand.force.get(ep.target, 0.0)
+        if ep.target in hand.fingers:
+            ep.finger_touch_step = self.steps
+        if ep.grip == ep.target:
+            ep.ever_gripped_target = True
+            ep.held_detached |= ep.target_detached
+        hand.clear()
 
     def _seals(self, k: int, point: np.ndarray, normal_cup_to_cap: np.ndarray) -> bool:
         """Seal test: cup axis vs. cap normal at the contact, and contact on the cap top."""
@@ -394,7 +457,7 @@ class SMS3DPickEnv(gym.Env):
         m.geom_contype[self.cup_geom] = ph.SOIL_CONAFFINITY
         ep.grip = k
         if k == ep.target:
-            ep.ever_sealed_target = True
+            ep.ever_gripped_target = True
 
     def _release(self) -> None:
         self.data.eq_active[self.grip_eq[self._ep.grip]] = 0
@@ -422,9 +485,9 @@ class SMS3DPickEnv(gym.Env):
             if u >= 1.0:
                 d.eq_active[self.root_eq[k]] = 0
                 for g in (self.cap_geoms[k], self.stem_geoms[k]):
-                    m.geom_contype[g], m.geom_conaffinity[g] = ph.FREE_CONTYPE, ph.FREE_CONAFFINITY
+                    m.geom_contype[g], m.geom_conaffinity[g] = ph.FREE_CONTYPE, self._free_aff
                 b = self.body_ids[k]
-                m.body_contype[b], m.body_conaffinity[b] = ph.FREE_CONTYPE, ph.FREE_CONAFFINITY
+                m.body_contype[b], m.body_conaffinity[b] = ph.FREE_CONTYPE, self._free_aff
                 ep.detached.add(k)
                 if k == ep.target:
                     ep.target_detached = True
@@ -466,7 +529,7 @@ class SMS3DPickEnv(gym.Env):
         m = self.model
         for k in ep.detached:
             b = self.body_ids[k]
-            if (m.body_conaffinity[b] != ph.LIFTED_CONAFFINITY
+            if (m.body_conaffinity[b] != self._lifted_aff
                     and self.data.xpos[b, 2] - self.init_xpos[k, 2] > ph.SOIL_CLEARANCE):
                 self._set_soil_contact(k, True)
                 # Only once the stem's collision hull is out of the soil: switching contacts on
@@ -479,7 +542,7 @@ class SMS3DPickEnv(gym.Env):
 
     def _set_soil_contact(self, k: int, on: bool) -> None:
         m = self.model
-        aff = ph.LIFTED_CONAFFINITY if on else ph.FREE_CONAFFINITY
+        aff = self._lifted_aff if on else self._free_aff
         for g in (self.cap_geoms[k], self.stem_geoms[k]):
             m.geom_conaffinity[g] = aff
         m.body_conaffinity[self.body_ids[k]] = aff
@@ -528,7 +591,7 @@ class SMS3DPickEnv(gym.Env):
             return "bruised"
         if ep.grip_lost:
             return "grip_lost"
-        if not ep.ever_sealed_target:
+        if not ep.ever_gripped_target:
             return "neighbour_disturbed" if ep.disturbed else "no_seal"
         if not ep.target_detached:
             return "not_detached"
@@ -559,8 +622,11 @@ class SMS3DPickEnv(gym.Env):
         mujoco.mju_mat2Quat(quat, d.site_xmat[self.tool_site])
         # One flat vector, one finiteness check, then views per entry (small-array numpy calls
         # dominate here, not arithmetic).
-        flat = np.concatenate([d.qpos[self.arm_qadr], d.qvel[self.arm_dadr], pos, quat,
-                               (float(ep.suction_on), float(ep.grip >= 0), ep.grip_util),
+        if self.hand is None:
+            tool = (float(ep.tool_on), float(ep.grip >= 0), ep.grip_util)
+        else:
+            tool = (self.hand.closure(d), float(ep.grip >= 0), ep.finger_force)
+        flat = np.concatenate([d.qpos[self.arm_qadr], d.qvel[self.arm_dadr], pos, quat, tool,
                                ep.target_pose, ep.target_pose[:3] - pos])
         if not np.isfinite(flat).all():
             flat = np.nan_to_num(flat)

@@ -1,8 +1,10 @@
-"""Robot assembly: the Kinova Jaco arm (dm_control's bundled model) with a suction tool.
+"""Robot assembly: the Kinova Jaco arm (dm_control's bundled model) with a suction tool or the
+Jaco 3-finger hand.
 
-The arm is loaded from the dm_control wheel (BSD-3, see ``assets/NOTICE.txt``), given gravity
-compensation and joint position actuators, fitted with a tool, and attached to a scene ``MjSpec``
-through a frame at the mount pose. Every name in the assembled model carries the ``jaco/`` prefix.
+The arm (and the hand) are loaded from the dm_control wheel (BSD-3, see ``assets/NOTICE.txt``),
+given gravity compensation and joint position actuators, fitted with a tool, and attached to a
+scene ``MjSpec`` through a frame at the mount pose. Every name in the assembled model carries the
+``jaco/`` prefix. Actuators: the six arm joints first, then (hand) the three fingers.
 """
 
 from __future__ import annotations
@@ -20,6 +22,12 @@ TOOL_SITE = "cup_site"  # suction: the cup face, +z out of the cup; hand: the gr
 CUP_BODY = "cup"
 CUP_GEOM = "cup_face"
 Tool = Literal["suction", "hand"]
+TOOLS: tuple[str, ...] = ("suction", "hand")
+# The hand's finger joints (one per finger; the distal segment is rigid) and, per finger, the
+# bodies whose geoms touch an object.
+FINGER_JOINTS: tuple[str, ...] = tuple(f"hand_finger_{i}" for i in range(1, 4))
+FINGER_BODIES: tuple[tuple[str, str], ...] = tuple(
+    (f"hand_b_finger_{i}", f"hand_b_finger_tip_{i}") for i in range(1, 4))
 
 # Collision bitmasks shared by robot, soil and mushrooms (see physics.py for the mushroom side).
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 4
@@ -55,12 +63,19 @@ class RobotConfig:
             the soil near z = 0; the base stands beside it so the whole patch is reachable with the
             tool pointing down and tilted by up to 45 degrees (checked in tests/test_env_robot.py).
         mount_yaw_deg: base rotation about world z.
-        tool: ``"suction"`` (default) or ``"hand"`` (the Jaco 3-finger hand, fingers unactuated).
+        tool: ``"suction"`` (default) or ``"hand"`` (the Jaco 3-finger hand on finger position
+            actuators).
         cup_radius: suction cup radius (m), 10 mm as in harvest-physics.md (20 mm cup).
         tube_length: length of the tube between the wrist flange and the cup (m). ASSUMPTION.
         kp_large, kp_small: position gains of the shoulder/elbow and wrist actuators (N m/rad).
             ASSUMPTION chosen for ~50 ms tracking with the model's armature.
         force_large, force_small: actuator torque limits (N m). ASSUMPTION near Jaco's ratings.
+        finger_kp, finger_force: finger position gain (N m/rad) and torque limit (N m).
+            ASSUMPTION: about 4 N at a fingertip 6 cm from its joint, above the 3.2 N shear force
+            that grips and twists a mushroom (harvest-physics.md), far below the bruising force.
+        finger_damping, finger_armature: finger joint damping (N m s/rad) and armature (kg m^2).
+            ASSUMPTION replacing dm_control's 0.75 and 0.1, which with this torque would close a
+            finger in ~6 s and hit a cap like a 1.4 kg mass: now ~2.4 rad/s, 0.3 kg at the tip.
     """
 
     mount_pos: tuple[float, float, float] = (-0.40, 0.0, -0.25)
@@ -72,11 +87,15 @@ class RobotConfig:
     kp_small: float = 500.0
     force_large: float = 40.0
     force_small: float = 15.0
+    finger_kp: float = 2.0
+    finger_force: float = 0.25
+    finger_damping: float = 0.1
+    finger_armature: float = 0.001
     home_q: tuple[float, ...] = field(default=tuple(HOME_Q))
 
     def __post_init__(self) -> None:
-        if self.tool not in ("suction", "hand"):
-            raise ValueError(f"RobotConfig.tool must be 'suction' or 'hand', got {self.tool!r}")
+        if self.tool not in TOOLS:
+            raise ValueError(f"RobotConfig.tool must be one of {TOOLS}, got {self.tool!r}")
         if not 0.003 <= self.cup_radius <= 0.05:
             raise ValueError(f"RobotConfig.cup_radius must be in [3, 50] mm, got {self.cup_radius!r}")
         if len(self.home_q) != 6:
@@ -103,15 +122,29 @@ def _add_suction_tool(b6: mujoco.MjsBody, cfg: RobotConfig) -> None:
     cup.add_site(name=TOOL_SITE, pos=[0, 0, -0.008], quat=[0, 1, 0, 0], size=[0.004, 0, 0])
 
 
-def _add_hand_tool(b6: mujoco.MjsBody, spec: mujoco.MjSpec) -> None:
+def _add_hand_tool(b6: mujoco.MjsBody, spec: mujoco.MjSpec, cfg: RobotConfig) -> None:
+    """The Jaco 3-finger hand: palm and fingers collide like the suction tool (soil, mushrooms;
+    not the arm), each finger joint on a position actuator over its full range."""
     hand = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_hand.xml"))
+    for g in hand.geoms:
+        g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
+    for j in hand.joints:
+        j.damping[0], j.armature, j.frictionloss = cfg.finger_damping, cfg.finger_armature, 0.01
     frame = b6.add_frame()
     frame.attach_body(hand.body("hand"), "hand_", "")
     grip = spec.site("hand_gripsite")
     palm = spec.body("hand_hand")
-    # The grip site re-created as the tool site (+z out of the palm), and a body for grip welds.
+    # The grip site re-created as the tool site (+z out of the palm, between the fingertips).
     palm.add_site(name=TOOL_SITE, pos=list(grip.pos), quat=[0, 1, 0, 0], size=[0.004, 0, 0])
-    palm.add_body(name=CUP_BODY, pos=list(grip.pos))
+    for body in ("hand_hand", *(b for pair in FINGER_BODIES for b in pair)):
+        spec.body(body).gravcomp = 1.0
+    for jname in FINGER_JOINTS:
+        act = spec.add_actuator(name=f"act_{jname}", target=jname, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=cfg.finger_kp)
+        act.ctrllimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.ctrlrange = list(spec.joint(jname).range)
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-cfg.finger_force, cfg.finger_force]
 
 
 def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
@@ -124,13 +157,6 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
     for name in COLLIDING_LINKS:
         for g in spec.body(name).geoms:
             g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
-    b6 = spec.body("b_6")
-    if cfg.tool == "suction":
-        _add_suction_tool(b6, cfg)
-    else:
-        _add_hand_tool(b6, spec)
-        for name in ("hand", "b_finger_1", "b_finger_2", "b_finger_3"):
-            spec.body("hand_" + name).gravcomp = 1.0
     for i, jname in enumerate(ARM_JOINTS):
         large = i < 3
         act = spec.add_actuator(name=f"act_{jname}", target=jname,
@@ -139,6 +165,11 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
         f = cfg.force_large if large else cfg.force_small
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.forcerange = [-f, f]
+    b6 = spec.body("b_6")
+    if cfg.tool == "suction":
+        _add_suction_tool(b6, cfg)
+    else:
+        _add_hand_tool(b6, spec, cfg)
     return spec
 
 

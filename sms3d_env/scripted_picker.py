@@ -4,12 +4,13 @@ Phases: approach a stand-off point above the *estimated* cap top along the estim
 with the cup facing down the axis; descend along the axis with suction on until the cup seals;
 twist about the estimated stem axis ("twist, do not pull", optionally with a gentle bend); lift
 straight up. A wrong estimate tilts the cup against the cap (no seal, or a contact off the cap
-top) and twists about the wrong axis, which bends the root and the seal.
+top) and twists about the wrong axis, which bends the root and the seal. ``HandPicker`` does the
+same with the Jaco hand: open, descend around the cap, close, twist, lift.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -22,6 +23,16 @@ def _quat_to_mat(q: np.ndarray) -> np.ndarray:
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
     ])
+
+
+class _View(NamedTuple):
+    """What every phase reads from the observation."""
+
+    p: np.ndarray  # tool site position
+    z: np.ndarray  # tool axis (approach direction)
+    c: np.ndarray  # estimated cap top
+    axis: np.ndarray  # estimated stem axis (unit)
+    held: bool  # the tool holds a mushroom (sealed, or pinched by the fingers)
 
 
 class ScriptedPicker:
@@ -37,6 +48,8 @@ class ScriptedPicker:
        base; a wrong axis turns part of the twist into bending of the root and the seal;
     4. ``lift``: straight up, the speed ramped up (no jerk on the seal).
 
+    ``for_env`` returns a ``HandPicker`` for an env with the hand.
+
     Args:
         max_linear_speed, max_angular_speed: the env's action scales (m/s, rad/s).
         standoff: approach point above the estimated cap top along the axis (m).
@@ -48,6 +61,9 @@ class ScriptedPicker:
         lift_speed, lift_ramp_steps: lift speed (m/s), reached linearly over this many steps.
         settle_steps: still steps after the seal forms (the arm stops pressing).
     """
+
+    approach_command = -1.0  # tool command on the way in (suction off)
+    hold_command = 1.0  # tool command from the grip on (suction on)
 
     def __init__(self, max_linear_speed: float = 0.12, max_angular_speed: float = 0.8,
                  control_dt: float = 0.04, standoff: float = 0.03, stem_height: float = 0.04,
@@ -63,8 +79,10 @@ class ScriptedPicker:
 
     @classmethod
     def for_env(cls, env: gym.Env, **kwargs: Any) -> ScriptedPicker:
+        """The picker for ``env``'s tool, at ``env``'s action scales."""
         u = env.unwrapped
-        return cls(u.ctrl_cfg.max_linear_speed, u.ctrl_cfg.max_angular_speed, u.control_dt, **kwargs)
+        picker = HandPicker if u.tool == "hand" else ScriptedPicker
+        return picker(u.ctrl_cfg.max_linear_speed, u.ctrl_cfg.max_angular_speed, u.control_dt, **kwargs)
 
     def reset(self) -> None:
         self.phase = "approach"
@@ -72,64 +90,119 @@ class ScriptedPicker:
         self.descended = 0.0
         self.lift_count = 0
 
-    def _action(self, v: np.ndarray, w: np.ndarray, suction: bool) -> np.ndarray:
-        a = np.concatenate([v / self.vmax, w / self.wmax, [1.0 if suction else -1.0]])
+    def _action(self, v: np.ndarray, w: np.ndarray, command: float) -> np.ndarray:
+        a = np.concatenate([v / self.vmax, w / self.wmax, [command]])
         return np.clip(a, -1, 1).astype(np.float32)
 
+    def _grasp_point(self, o: _View) -> np.ndarray:
+        """Where the approach ends (the tool site), before the descent."""
+        return o.c + o.axis * self.standoff
+
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
-        p = obs["tool_pose"][:3]
-        z = _quat_to_mat(obs["tool_pose"][3:])[:, 2]
-        c, axis = obs["target_pose"][:3], obs["target_pose"][3:]
-        axis = axis / np.linalg.norm(axis)
-        w_align = 3.0 * np.cross(z, -axis)
-        gripped = obs["suction"][1] > 0.5
-        if self.phase == "approach":
-            goal = c + axis * self.standoff
-            err = goal - p
-            ang = np.degrees(np.arccos(np.clip(z @ -axis, -1, 1)))
-            if np.linalg.norm(err) < 0.003 and ang < 3.0:
-                self.phase = "descend"
-            # Proportional, at least 2 cm/s until the tolerance (no slow creep near the goal).
-            n_err = np.linalg.norm(err)
-            speed = min(self.vmax, max(4.0 * n_err, 0.02))
-            v = err / max(n_err, 1e-9) * speed
-            return self._action(v, w_align, False)
-        if self.phase == "descend":
-            if gripped:
-                self.phase, self.count = "settle", 0
-                return self._action(np.zeros(3), np.zeros(3), True)
-            self.descended += self.descend_speed * self.dt
-            if self.descended > self.standoff + 0.02:
-                self.phase = "lift"
-            rel = p - c
-            lateral = rel - (rel @ axis) * axis
-            v = -axis * self.descend_speed - 4.0 * lateral
-            return self._action(v, w_align, True)
-        if self.phase == "settle":
-            self.count += 1
-            if self.count >= self.settle_steps:
-                self.phase, self.count = "twist", 0
-            return self._action(np.zeros(3), np.zeros(3), True)
-        if self.phase == "twist":
-            self.count += 1
-            if self.count >= self.twist_steps:
-                self.phase = "lift"
-            w = self.twist_rate * axis
-            v = self.pull_speed * axis
-            if self.bend_rate > 0:
-                horiz = np.array([axis[0], axis[1], 0.0])
-                if np.linalg.norm(horiz) < 0.05:
-                    horiz = np.array([1.0, 0.0, 0.0])
-                bend_axis = np.cross(np.array([0.0, 0.0, 1.0]), horiz)
-                bend_axis /= np.linalg.norm(bend_axis)
-                wb = self.bend_rate * bend_axis
-                w = w + wb
-                v = v + np.cross(wb, p - (c - axis * self.stem_height))
-            return self._action(v, w, True)
-        # Lift straight up, the speed ramped up over ``lift_ramp_steps`` (no jerk on the seal).
+        axis = obs["target_pose"][3:]
+        o = _View(p=obs["tool_pose"][:3], z=_quat_to_mat(obs["tool_pose"][3:])[:, 2],
+                  c=obs["target_pose"][:3], axis=axis / np.linalg.norm(axis),
+                  held=bool(obs["suction"][1] > 0.5))
+        return getattr(self, "_" + self.phase)(o)
+
+    def _align(self, o: _View) -> np.ndarray:
+        """Angular velocity turning the tool axis onto the estimated stem axis (facing down it)."""
+        return 3.0 * np.cross(o.z, -o.axis)
+
+    def _approach(self, o: _View) -> np.ndarray:
+        err = self._grasp_point(o) - o.p
+        ang = np.degrees(np.arccos(np.clip(o.z @ -o.axis, -1, 1)))
+        if np.linalg.norm(err) < 0.003 and ang < 3.0:
+            self.phase = "descend"
+        # Proportional, at least 2 cm/s until the tolerance (no slow creep near the goal).
+        n_err = np.linalg.norm(err)
+        speed = min(self.vmax, max(4.0 * n_err, 0.02))
+        v = err / max(n_err, 1e-9) * speed
+        return self._action(v, self._align(o), self.approach_command)
+
+    def _descend_velocity(self, o: _View) -> np.ndarray:
+        """Down the estimated axis, pulled back onto it."""
+        rel = o.p - o.c
+        lateral = rel - (rel @ o.axis) * o.axis
+        return -o.axis * self.descend_speed - 4.0 * lateral
+
+    def _descend(self, o: _View) -> np.ndarray:
+        if o.held:
+            self.phase, self.count = "settle", 0
+            return self._action(np.zeros(3), np.zeros(3), self.hold_command)
+        self.descended += self.descend_speed * self.dt
+        if self.descended > self.standoff + 0.02:
+            self.phase = "lift"
+        return self._action(self._descend_velocity(o), self._align(o), self.hold_command)
+
+    def _settle(self, o: _View) -> np.ndarray:
+        self.count += 1
+        if self.count >= self.settle_steps:
+            self.phase, self.count = "twist", 0
+        return self._action(np.zeros(3), np.zeros(3), self.hold_command)
+
+    def _twist(self, o: _View) -> np.ndarray:
+        self.count += 1
+        if self.count >= self.twist_steps:
+            self.phase = "lift"
+        w = self.twist_rate * o.axis
+        v = self.pull_speed * o.axis
+        if self.bend_rate > 0:
+            horiz = np.array([o.axis[0], o.axis[1], 0.0])
+            if np.linalg.norm(horiz) < 0.05:
+                horiz = np.array([1.0, 0.0, 0.0])
+            bend_axis = np.cross(np.array([0.0, 0.0, 1.0]), horiz)
+            bend_axis /= np.linalg.norm(bend_axis)
+            wb = self.bend_rate * bend_axis
+            w = w + wb
+            v = v + np.cross(wb, o.p - (o.c - o.axis * self.stem_height))
+        return self._action(v, w, self.hold_command)
+
+    def _lift(self, o: _View) -> np.ndarray:
+        # Straight up, the speed ramped up over ``lift_ramp_steps`` (no jerk on the grip).
         self.lift_count += 1
         speed = self.lift_speed * min(1.0, self.lift_count / self.lift_ramp_steps)
-        return self._action(np.array([0.0, 0.0, speed]), np.zeros(3), True)
+        return self._action(np.array([0.0, 0.0, speed]), np.zeros(3), self.hold_command)
+
+
+class HandPicker(ScriptedPicker):
+    """The scripted picker for the Jaco 3-finger hand: approach above the estimated cap top along
+    the estimated axis with the fingers opened to ``preshape``, descend until the grip site is
+    ``grasp_offset`` above the cap top (the closing fingertips then meet the cap's side below
+    its top), close for ``close_steps``, twist (and bend), lift with the hand closed.
+
+    Args (besides ``ScriptedPicker``'s):
+        grasp_offset: grip site above the estimated cap top at the grasp, along the axis (m).
+        preshape: finger command while approaching (-1 open, +1 closed): open wide enough for the
+            largest caps, no wider (the fingertips sweep through fewer neighbours).
+        close_steps: control steps to close the fingers before twisting.
+    """
+
+    hold_command = 1.0  # fingers closed
+
+    def __init__(self, *args: Any, grasp_offset: float = 0.0, preshape: float = -0.4,
+                 close_steps: int = 12, **kwargs: Any) -> None:
+        self.grasp_offset, self.approach_command = grasp_offset, preshape
+        self.close_steps = close_steps
+        super().__init__(*args, **kwargs)
+
+    def _grasp_point(self, o: _View) -> np.ndarray:
+        return o.c + o.axis * (self.grasp_offset + self.standoff)
+
+    def _descend(self, o: _View) -> np.ndarray:
+        # Close at the grasp point, or where the descent stalls (a finger on the soil or on a
+        # neighbour), once the commanded travel exceeds the stand-off by 2 cm.
+        self.descended += self.descend_speed * self.dt
+        if (o.p - o.c) @ o.axis <= self.grasp_offset or self.descended > self.standoff + 0.02:
+            self.phase, self.count = "close", 0
+            return self._close(o)
+        return self._action(self._descend_velocity(o), self._align(o), self.approach_command)
+
+    def _close(self, o: _View) -> np.ndarray:
+        self.count += 1
+        if self.count >= self.close_steps:
+            self.phase, self.count = "twist", 0
+        return self._action(np.zeros(3), self._align(o), self.hold_command)
 
 
 def run_episode(env: gym.Env, policy: Any, seed: int, options: dict[str, Any] | None = None) -> dict[str, Any]:

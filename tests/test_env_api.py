@@ -34,27 +34,34 @@ def _unexpected(caught):
     return [str(w.message) for w in caught if not any(a in str(w.message) for a in ALLOWED_WARNINGS)]
 
 
-def test_gymnasium_check_env():
+@pytest.mark.parametrize("tool", ["suction", "hand"])
+def test_gymnasium_check_env(tool):
     import warnings
 
     from gymnasium.utils.env_checker import check_env
 
-    env = make().unwrapped
+    env = make(tool=tool).unwrapped
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_env(env, skip_render_check=True)
     assert _unexpected(caught) == []
 
 
-def test_sb3_check_env():
+@pytest.mark.parametrize("tool", ["suction", "hand"])
+def test_sb3_check_env(tool):
     import warnings
 
     from stable_baselines3.common.env_checker import check_env
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        check_env(make().unwrapped, warn=True)
+        check_env(make(tool=tool).unwrapped, warn=True)
     assert _unexpected(caught) == []
+
+
+def test_invalid_tool_names_the_valid_ones():
+    with pytest.raises(ValueError, match="tool must be one of .*'suction'.*'hand'.*'gripper'"):
+        make(tool="gripper")
 
 
 def _rollout(seed):
@@ -90,8 +97,9 @@ def test_reset_seeding_changes_scene():
     assert not np.array_equal(o1["target_pose"], o2["target_pose"])
 
 
-def test_pickle_round_trip():
-    env = make().unwrapped
+@pytest.mark.parametrize("tool", ["suction", "hand"])
+def test_pickle_round_trip(tool):
+    env = make(tool=tool).unwrapped
     env.reset(seed=0)
     clone = pickle.loads(pickle.dumps(env))
     a = np.zeros(7, np.float32)
@@ -101,9 +109,10 @@ def test_pickle_round_trip():
         np.testing.assert_allclose(o1[k], o2[k])
 
 
+@pytest.mark.parametrize("tool", ["suction", "hand"])
 @pytest.mark.parametrize("mode", ["rgb_array", "depth_array"])
-def test_render_modes(mode):
-    env = make(render_mode=mode, render_size=(48, 64))
+def test_render_modes(mode, tool):
+    env = make(render_mode=mode, render_size=(48, 64), tool=tool)
     env.reset(seed=0)
     img = env.render()
     if mode == "rgb_array":

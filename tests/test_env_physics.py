@@ -68,8 +68,15 @@ def test_failure_cause_vocabulary():
     assert info["is_success"] is False
 
 
-def test_wrist_hand_and_tool_collide_with_soil_and_mushrooms_not_with_the_arm():
-    env = gym.make("SMS3DPick-v0", scene_config=SMALL).unwrapped
+TOOL_GEOMS = {
+    "suction": ["jaco/tube", "jaco/flange", "jaco/cup_face"],
+    "hand": ["jaco/hand_link_6_main", "jaco/hand_finger_knuckle_1", "jaco/hand_finger_tip_2"],
+}
+
+
+@pytest.mark.parametrize("tool", list(TOOL_GEOMS))
+def test_wrist_hand_and_tool_collide_with_soil_and_mushrooms_not_with_the_arm(tool):
+    env = gym.make("SMS3DPick-v0", scene_config=SMALL, tool=tool).unwrapped
     env.reset(seed=0)
     m = env.model
 
@@ -79,7 +86,7 @@ def test_wrist_hand_and_tool_collide_with_soil_and_mushrooms_not_with_the_arm():
 
     soil = m.geom("terrain").id
     cap = int(env.cap_geoms[env._ep.target])
-    names = ["jaco/ring_5", "jaco/link_5", "jaco/ring_6", "jaco/tube", "jaco/flange", "jaco/cup_face"]
+    names = ["jaco/ring_5", "jaco/link_5", "jaco/ring_6", *TOOL_GEOMS[tool]]
     geoms = [m.geom(n).id for n in names]
     for g in geoms:
         assert collide(g, soil) and collide(g, cap), m.geom(g).name
