@@ -11,6 +11,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco  # noqa: E402
 
 from generator.files import save_rgb_png  # noqa: E402
+from generator.gl import open_renderer
 from generator.mjcf import scene_to_model  # noqa: E402
 from generator.scene import Scene  # noqa: E402
 
@@ -25,7 +26,7 @@ def render_views(scene: Scene, width: int = 640, height: int = 480) -> np.ndarra
     oblique = mujoco.MjvCamera()
     oblique.lookat[:] = [0.0, 0.0, float(np.median(scene.terrain.heights))]
     oblique.distance, oblique.azimuth, oblique.elevation = 0.55, 60.0, -35.0
-    with mujoco.Renderer(model, height, width) as renderer:
+    with open_renderer(model, height, width) as renderer:
         renderer.update_scene(data, camera="overhead")
         top = renderer.render()
         renderer.update_scene(data, camera=oblique)

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 from gymnasium import spaces
 
+from generator.gl import open_renderer
 from sms3d_env import physics as ph
 from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.hand import HandGrasp, add_stem_sockets
@@ -650,7 +651,7 @@ class SMS3DPickEnv(gym.Env):
         key = (h, w)
         r = self._renderers.get(key)
         if r is None:
-            r = mujoco.Renderer(self.model, h, w)
+            r = open_renderer(self.model, h, w)
             self._renderers[key] = r
         if depth:
             r.enable_depth_rendering()

@@ -23,6 +23,7 @@ import mujoco  # noqa: E402
 from generator.camera import Intrinsics, camera_intrinsics, project, world_from_camera_cv
 from generator.dataset.options import DatasetOptions
 from generator.dataset.realism import apply_depth_realism, randomise_model
+from generator.gl import open_renderer
 from generator.mjcf import scene_to_spec
 from generator.scene import Scene
 
@@ -72,8 +73,8 @@ class SceneRenderer:
         r = self._renderer
         if r is None or not all(hasattr(r, a) for a in ("_mjr_context", "_gl_context", "_scene", "_model")):
             self.close()
-            self._renderer = mujoco.Renderer(model, self.height, self.width, max_geom=model.ngeom + 64,
-                                             font_scale=_FONT_SCALE)
+            self._renderer = open_renderer(model, self.height, self.width, max_geom=model.ngeom + 64,
+                                           font_scale=_FONT_SCALE)
             return self._renderer
         if r._gl_context:
             r._gl_context.make_current()
