@@ -94,8 +94,8 @@ class ScriptedPicker:
         a = np.concatenate([v / self.vmax, w / self.wmax, [command]])
         return np.clip(a, -1, 1).astype(np.float32)
 
-    def _grasp_point(self, o: _View) -> np.ndarray:
-        """Where the approach ends (the tool site), before the descent."""
+    def _approach_goal(self, o: _View) -> np.ndarray:
+        """Where the approach ends (the tool site): the stand-off point above the cap top."""
         return o.c + o.axis * self.standoff
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
@@ -110,7 +110,7 @@ class ScriptedPicker:
         return 3.0 * np.cross(o.z, -o.axis)
 
     def _approach(self, o: _View) -> np.ndarray:
-        err = self._grasp_point(o) - o.p
+        err = self._approach_goal(o) - o.p
         ang = np.degrees(np.arccos(np.clip(o.z @ -o.axis, -1, 1)))
         if np.linalg.norm(err) < 0.003 and ang < 3.0:
             self.phase = "descend"
@@ -178,15 +178,13 @@ class HandPicker(ScriptedPicker):
         close_steps: control steps to close the fingers before twisting.
     """
 
-    hold_command = 1.0  # fingers closed
-
     def __init__(self, *args: Any, grasp_offset: float = 0.0, preshape: float = -0.4,
                  close_steps: int = 12, **kwargs: Any) -> None:
         self.grasp_offset, self.approach_command = grasp_offset, preshape
         self.close_steps = close_steps
         super().__init__(*args, **kwargs)
 
-    def _grasp_point(self, o: _View) -> np.ndarray:
+    def _approach_goal(self, o: _View) -> np.ndarray:
         return o.c + o.axis * (self.grasp_offset + self.standoff)
 
     def _descend(self, o: _View) -> np.ndarray:
