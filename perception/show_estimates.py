@@ -52,7 +52,7 @@ def _draw_boxes(img: np.ndarray, boxes: list[OrientedBox], sample: SceneSample, 
 
 
 def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out_png: str | Path,
-                     elevation: float = 25.0, azimuth: float = -60.0) -> Path:
+                     elevation: float = 30.0, azimuth: float = -65.0) -> Path:
     """Write the two-panel PNG (image overlay | 3D view) of ``estimates`` on ``sample``."""
     import matplotlib
 
@@ -75,9 +75,13 @@ def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out
     _draw_boxes(overlay, predicted, sample, ESTIMATE_RGB)
 
     points, colours = depth_to_points(sample.depth, intr, sample.depth > 0, sample.rgb)
-    keep = np.random.default_rng(0).choice(len(points), size=min(len(points), 25_000), replace=False)
-    points = points[keep] @ world[:3, :3].T + world[:3, 3]
-    colours = colours[keep]
+    points = points @ world[:3, :3].T + world[:3, 3]
+    corners = np.concatenate([b.corners for b in truth + predicted]) if truth or predicted else points
+    lo, hi = corners.min(0) - 0.02, corners.max(0) + 0.02  # zoom on the mushrooms
+    inside = np.all((points >= lo) & (points <= hi), axis=1)
+    keep = np.flatnonzero(inside)
+    keep = np.random.default_rng(0).choice(keep, size=min(len(keep), 40_000), replace=False)
+    points, colours = points[keep], colours[keep]
 
     fig = plt.figure(figsize=(13, 5.2), dpi=110)
     ax_img = fig.add_subplot(1, 2, 1)
@@ -86,14 +90,17 @@ def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out
     ax_img.axis("off")
     ax3d = fig.add_subplot(1, 2, 2, projection="3d")
     ax3d.scatter(points[:, 0], points[:, 1], points[:, 2], c=colours,
-                 s=0.3, linewidths=0)
+                 s=0.6, linewidths=0)
     for boxes, colour in ((truth, TRUTH_RGB), (predicted, ESTIMATE_RGB)):
         for box in boxes:
             c = box.corners
             for a, b in BOX_EDGES:
                 ax3d.plot(*zip(c[a], c[b]), color=np.array(colour) / 255.0, linewidth=0.8)
     ax3d.view_init(elev=elevation, azim=azimuth)
-    ax3d.set_box_aspect((np.ptp(points[:, 0]), np.ptp(points[:, 1]), max(np.ptp(points[:, 2]), 0.05)))
+    ax3d.set_xlim(lo[0], hi[0])
+    ax3d.set_ylim(lo[1], hi[1])
+    ax3d.set_zlim(lo[2], hi[2])
+    ax3d.set_box_aspect(tuple(np.maximum(hi - lo, 0.08)))
     ax3d.set_xlabel("x (m)")
     ax3d.set_ylabel("y (m)")
     ax3d.set_zlabel("z (m)")
