@@ -28,9 +28,11 @@ PROXY_SEGMENTS = 8  # around the stem axis: proxies have ~260 triangles, models 
 # 75 % of pairs overlap by more than tau and the inner proxies decide half of them; from 0.6, 5 %
 # do and the outer proxies decide 90 %; in between a proxy boolean saves less than it costs.
 DEEP, SHALLOW = 0.45, 0.6
-# Bounds decide only when they clear the threshold by this fraction of the summed volumes:
-# far above the round-off of either computation, so a bound never overrules a boolean.
-_SAFETY = 1e-9
+# Bounds decide only when they clear the threshold by this fraction of the summed volumes.
+# manifold3d merges features within its tolerance (about 3.5e-9 m for these float32 meshes),
+# which can move a computed volume by up to tolerance x surface area: at most ~1e-6 of the
+# volumes here. A hundred times that, a bound never overrules what the boolean would say.
+_SAFETY = 1e-4
 
 
 def _mesh_to_manifold(vertices: np.ndarray, faces: np.ndarray) -> manifold3d.Manifold:
