@@ -2,7 +2,8 @@
 
 Targets (SMS3D Table 1 was measured on a GPU): <= 5.5 ms per 1024-point mushroom and
 <= 100 ms per batch of 100. Prints one Markdown table; run ``python benchmarks/bench_pose.py``.
-Times are medians over ``--repeats`` runs after a warm-up, in eval mode under ``no_grad``.
+Times are medians over ``--repeats`` runs after a warm-up, in eval mode under ``inference_mode``
+(as ``PoseEstimator`` runs it).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from perception.pose_net import PoseNet, PoseNetConfig
 
 
 def time_ms(model: PoseNet, x: torch.Tensor, repeats: int) -> float:
-    with torch.no_grad():
+    with torch.inference_mode():
         model(x)
         ts = []
         for _ in range(repeats):

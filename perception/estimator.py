@@ -87,7 +87,7 @@ class PoseEstimator:
         except NoEstimate:
             return None
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def estimate_batch(
         self, clouds: Sequence[np.ndarray], colors: Sequence[np.ndarray | None] | None = None
     ) -> list[Estimate]:

@@ -10,14 +10,24 @@
 
 Sizes are modest so that 1024-point inference is a few milliseconds on a CPU: a per-point
 embedding (no attention at full resolution), then N → N/8 → N/32 with attention at both levels.
+The forward passes evaluate these formulas in a cheaper order (projections before gathers,
+folded biases, late softmax normalisation, CPU batches in chunks) with the same FPS and kNN;
+``tests/test_perception_backbone_equivalence.py`` pins them to the plain formulation.
 """
 
 from __future__ import annotations
 
 import torch
 from torch import nn
+from torch.nn import functional as F
 
-from perception.backbones.ops import farthest_point_sample, gather_points, knn
+from perception.backbones.ops import (
+    farthest_point_sample,
+    flat_index,
+    gather_points,
+    gather_rows,
+    knn,
+)
 
 
 class PointTransformerLayer(nn.Module):
@@ -42,12 +52,26 @@ class PointTransformerLayer(nn.Module):
     def forward(self, xyz: torch.Tensor, feats: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
         """``xyz (B, N, 3)``, ``feats (B, N, D)``, neighbour ``idx (B, N, k)`` → ``(B, N, D)``."""
         B, N, D = feats.shape
-        q = self.q(feats)
-        k = gather_points(self.kk(feats), idx)
-        v = gather_points(self.v(feats), idx)
-        delta = self.pos(xyz.unsqueeze(2) - gather_points(xyz, idx))
-        w = torch.softmax(self.attn(q.unsqueeze(2) - k + delta), dim=2)  # (B, N, k, D/share)
-        out = ((v + delta).view(B, N, -1, self.share, D // self.share) * w.unsqueeze(3)).sum(dim=2)
+        k, G, s = idx.shape[-1], D // self.share, self.share
+        pos1, pos2, att1, att2 = self.pos[0], self.pos[2], self.attn[1], self.attn[3]
+        flat = flat_index(idx, N)
+        # δ_ij = W₂h_ij + b₂ enters as q_i − k_j + δ_ij and v_j + δ_ij: one projection gives
+        # q + b₂, −k and v + b₂, so both (B, N, k, D) tensors are a gather plus in-place updates.
+        w = torch.cat((self.q.weight, -self.kk.weight, self.v.weight))
+        b = torch.cat((self.q.bias + pos2.bias, -self.kk.bias, self.v.bias + pos2.bias))
+        qb, neg_k, vb = F.linear(feats, w, b).split(D, dim=-1)
+        rel = xyz.unsqueeze(2) - gather_rows(xyz, flat, (B, N, k))
+        h = torch.relu_(F.linear(rel, pos1.weight, pos1.bias)).view(-1, 3)  # (B·N·k, 3)
+        w2t = pos2.weight.t()
+        a = gather_rows(neg_k, flat, (B, N, k)).add_(qb.unsqueeze(2))
+        a.view(-1, D).addmm_(h, w2t).relu_()
+        logits = F.linear(torch.relu_(F.linear(a, att1.weight, att1.bias)), att2.weight, att2.bias)
+        # Softmax over the neighbours, normalised after the weighted sum (k× fewer divisions).
+        e = (logits - logits.amax(dim=2, keepdim=True)).exp_()  # (B, N, k, G)
+        vd = gather_rows(vb, flat, (B, N, k))
+        vd.view(-1, D).addmm_(h, w2t)
+        # Channel c = i·G + g uses weight g (channels viewed as (share, G)).
+        out = (vd.view(B, N, k, s, G) * e.unsqueeze(3)).sum(2).div_(e.sum(2).unsqueeze(2))
         return out.reshape(B, N, D)
 
 
@@ -80,14 +104,24 @@ class TransitionDown(nn.Module):
     def forward(self, xyz: torch.Tensor, feats: torch.Tensor, centre_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         centres = gather_points(xyz, centre_idx)
         idx, _ = knn(centres, xyz, self.k)
-        rel = gather_points(xyz, idx) - centres.unsqueeze(2)
-        grouped = torch.cat((rel, gather_points(feats, idx)), dim=-1)
-        return centres, self.mlp(grouped).max(dim=2).values
+        lin, norm = self.mlp[0], self.mlp[1]
+        # W [p_j − p_i, f_j] + b = (W [p_j, f_j] + b) − W_p p_i: project the N source points once
+        # and gather the projections, instead of projecting M·k gathered rows.
+        src = F.linear(torch.cat((xyz, feats), dim=-1), lin.weight, lin.bias)
+        h = gather_points(src, idx).sub_(F.linear(centres, lin.weight[:, :3]).unsqueeze(2))
+        # ReLU commutes with the max over the neighbours: apply it to the pooled values.
+        return centres, torch.relu(norm(h).amax(dim=2))
 
 
 class PointTransformer(nn.Module):
     """Point Transformer encoder: embed(32) → TD(N/8, 64) + PT block → TD(N/32, 128) + PT block
     → max-pool; ``out_dim = 128`` (``dims[-1]``)."""
+
+    #: On CPU, clouds are encoded in chunks whose largest tensors (kNN distances and per-neighbour
+    #: features, ``N/8 · max(N, k · dims[1])`` floats a cloud) hold about this many floats: 2 MB,
+    #: cache-sized. A batch of 100 at once runs at memory speed instead, and tensors past glibc's
+    #: 32 MB mmap threshold pay page faults on every allocation.
+    chunk_elements: int = 1 << 19
 
     def __init__(
         self,
@@ -100,6 +134,7 @@ class PointTransformer(nn.Module):
         d0, d1, d2 = dims
         self.m1 = max(num_points // 8, min(num_points, 16))
         self.m2 = max(self.m1 // 4, min(self.m1, 8))
+        self.neighbour_width = k * d1
         self.embed = nn.Sequential(nn.Linear(in_channels, d0), nn.LayerNorm(d0), nn.ReLU(inplace=True), nn.Linear(d0, d0))
         self.td1 = TransitionDown(d0, d1, k)
         self.pt1 = PointTransformerBlock(d1, k)
@@ -110,13 +145,23 @@ class PointTransformer(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """``x (B, N, C)`` → ``(B, out_dim)``."""
         xyz = x[..., :3].contiguous()
-        f0 = self.embed(x)
-        m1 = min(self.m1, xyz.shape[1])
-        fps = farthest_point_sample(xyz, m1)  # one run; its prefix is the next level's FPS
-        xyz1, f1 = self.td1(xyz, f0, fps)
+        B, N, _ = xyz.shape
+        m1 = min(self.m1, N)
+        # One FPS run for the whole batch (its cost is per step, not per cloud); its prefix is
+        # the next level's FPS.
+        fps = farthest_point_sample(xyz, m1)
+        step = B if x.device.type != "cpu" else max(1, self.chunk_elements // (m1 * max(N, self.neighbour_width)))
+        if step >= B:
+            return self._encode(x, xyz, fps)
+        parts = [self._encode(x[i : i + step], xyz[i : i + step], fps[i : i + step]) for i in range(0, B, step)]
+        return torch.cat(parts)
+
+    def _encode(self, x: torch.Tensor, xyz: torch.Tensor, fps: torch.Tensor) -> torch.Tensor:
+        """The levels after FPS for clouds ``x (b, N, C)`` with their FPS indices ``(b, m1)``."""
+        xyz1, f1 = self.td1(xyz, self.embed(x), fps)
         f1 = self.pt1(xyz1, f1)
-        m2 = min(self.m2, m1)
+        m2 = min(self.m2, fps.shape[1])
         ar = torch.arange(m2, device=x.device).expand(x.shape[0], m2)
         xyz2, f2 = self.td2(xyz1, f1, ar)
         f2 = self.pt2(xyz2, f2)
-        return f2.max(dim=1).values
+        return f2.amax(dim=1)

@@ -24,4 +24,4 @@ class PointNet(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """``x (B, N, C)`` → ``(B, out_dim)``."""
-        return self.mlp(x).max(dim=1).values
+        return self.mlp(x).amax(dim=1)

@@ -37,7 +37,7 @@ class SetAbstraction(nn.Module):
         idx = torch.where(d2 <= self.radius**2, idx, idx[..., :1])
         rel = (gather_points(xyz, idx) - centres.unsqueeze(2)) / self.radius
         grouped = torch.cat((rel, gather_points(feats, idx)), dim=-1)
-        return centres, self.mlp(grouped).max(dim=2).values
+        return centres, self.mlp(grouped).amax(dim=2)
 
 
 class PointNet2(nn.Module):
@@ -61,4 +61,4 @@ class PointNet2(nn.Module):
         m2 = min(self.m2, m1)
         ar = torch.arange(m2, device=x.device).expand(x.shape[0], m2)
         xyz2, f2 = self.sa2(xyz1, f1, ar)
-        return self.sa3(torch.cat((xyz2, f2), dim=-1)).max(dim=1).values
+        return self.sa3(torch.cat((xyz2, f2), dim=-1)).amax(dim=1)
