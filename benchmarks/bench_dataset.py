@@ -21,8 +21,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from generator import SceneConfig  # noqa: E402
+from generator import SceneConfig, model_library  # noqa: E402
 from generator.dataset import generate_dataset  # noqa: E402
+from generator.overlap import model_solid  # noqa: E402
 
 ANCHOR_S_PER_SCENE = {10: 2.51, 50: 8.43, 100: 12.24}
 
@@ -35,6 +36,9 @@ def main() -> None:
     ap.add_argument("--size", default="640x480")
     args = ap.parse_args()
     w, h = (int(x) for x in args.size.split("x"))
+    for species in ("white", "brown"):  # models and their overlap proxies: built once per process
+        for model_id in range(len(model_library(species))):
+            model_solid(species, model_id)
     print("| requested | workers | scenes | s/scene | scenes/s | speed-up vs anchor | MB/scene | peak RSS MiB (self / children) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for n in args.counts:
