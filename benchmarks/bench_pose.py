@@ -11,11 +11,15 @@ from __future__ import annotations
 import argparse
 import io
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import torch
 
-from perception.pose_net import PoseNet, PoseNetConfig
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # runs from a checkout
+
+from perception.pose_net import PoseNet, PoseNetConfig  # noqa: E402
 
 
 def time_ms(model: PoseNet, x: torch.Tensor, repeats: int) -> float:
