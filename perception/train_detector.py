@@ -35,7 +35,9 @@ from perception.maskrcnn import (
 @dataclass(frozen=True)
 class DetectorTrainConfig:
     """Optimisation settings. AdamW with a linear warm-up suits training from scratch on small
-    synthetic sets; ``max_images`` caps the training images (for smoke runs and overfitting)."""
+    synthetic sets; ``max_images`` caps the training images (for smoke runs and overfitting);
+    ``passes_per_epoch`` repeats a small training set within an epoch, so that tiny sets are not
+    checkpointed and validated after every iteration."""
 
     epochs: int = 20
     batch_size: int = 2
@@ -45,12 +47,13 @@ class DetectorTrainConfig:
     seed: int = 0
     augment: bool = True
     max_images: int | None = None
+    passes_per_epoch: int = 1
     pretrained: bool = False
     val_split: str = "val"
     max_val_images: int | None = 20
 
     def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size"):
+        for name in ("epochs", "batch_size", "passes_per_epoch"):
             if getattr(self, name) < 1:
                 raise PerceptionConfigError(name, f"must be >= 1, got {getattr(self, name)}")
         if not (self.lr > 0 and math.isfinite(self.lr)):
@@ -81,6 +84,8 @@ def train_detector(root: str | Path, out: str | Path, config: DetectorConfig | N
         dataset = torch.utils.data.Subset(dataset, range(min(train.max_images, len(dataset))))
     if len(dataset) == 0:
         raise PerceptionConfigError("root", f"{root}: the train split has no images")
+    if train.passes_per_epoch > 1:
+        dataset = torch.utils.data.ConcatDataset([dataset] * train.passes_per_epoch)
     has_val = _has_split(root, train.val_split) and bool(CocoDetectionDataset(root, train.val_split, config.category).images)
 
     model = build_maskrcnn(config, pretrained=train.pretrained).to(device)
