@@ -1,5 +1,6 @@
 """Speed of SMS3DPick-v0: env steps/s (state observations, 50 mushrooms), reset time, and
-steps/s with 64 x 64 RGB-D observations. Anchor: FetchPickAndPlace-v4 ~1,100 steps/s here.
+steps/s with 64 x 64 RGB-D observations. Anchor: FetchPickAndPlace-v4 ~1,100 steps/s here
+(measure it beside this run with bench_fetch.py).
 
 Usage: python benchmarks/bench_env.py [--steps 500]
 """
@@ -52,7 +53,7 @@ def main() -> None:
     print(f"{'observation':<22}{'steps/s':>10}{'reset (s)':>12}")
     for name, r, rs in rows:
         print(f"{name:<22}{r:>10.0f}{rs:>12.3f}")
-    print("anchor: FetchPickAndPlace-v4 ~1,100 steps/s (state)")
+    print("anchor: FetchPickAndPlace-v4 ~1,100 steps/s (state); measure it here with bench_fetch.py")
 
 
 if __name__ == "__main__":
