@@ -110,11 +110,9 @@ def test_coco_evaluation_scores_the_oracle_perfectly(beds):
         assert scores.ap > 0.95
 
 
-@pytest.mark.slow
 def test_short_training_overfits_a_few_scenes(beds, tmp_path):
-    # From random weights Mask R-CNN needs ~80-100 iterations before its scores rise on these two
-    # images (measured: mask AP50 0.0 at 60, 0.50 at 80, 0.72 at 120 iterations).
-    torch.set_num_threads(2)
+    # From random weights, 120 iterations with the cosine schedule give mask AP50 ≈ 0.59 on these
+    # two images (at a constant rate the scores swung between 0.05 and 0.26 from epoch to epoch).
     train = DetectorTrainConfig(epochs=6, passes_per_epoch=20, batch_size=2, lr=2e-3, warmup_iters=5, augment=False)
     log = train_detector(beds, tmp_path / "run", SMALL, train, progress=False)
     assert len(log) == 6 and log[-1]["train_loss"] < 0.5 * log[0]["train_loss"]
