@@ -3,8 +3,9 @@ and the two-stage pipeline's time per scene (detector + pose network).
 
 Target (issue): under 1 s per image for the light configuration on this CPU. Times are medians
 over ``--repeats`` runs after a warm-up, eval mode, no_grad, on a rendered dataset scene. Network
-weights do not change the time much (random weights score few boxes, so ``--checkpoint`` should
-be a trained detector for the pipeline rows: the mask head runs once per detection).
+weights matter: torchvision runs the mask head on every box scoring over 0.05 (up to 100), which
+random weights produce in numbers, so the random-weight rows are upper bounds and ``--checkpoint``
+(a trained detector) gives the realistic row and the pipeline rows.
 
     python benchmarks/bench_detector.py --data runs/pose_scenes_heldout [--checkpoint best.pt]
 """
@@ -58,11 +59,17 @@ def main() -> None:
         params = sum(t.numel() for t in detector.model.parameters()) / 1e6
         ms = median_ms(lambda d=detector: d.detect(sample.rgb), args.repeats)
         print(f"| {arch} (random weights) | {size[1]} x {size[0]} | {params:.1f} | {ms:.0f} |")
+    trained = MaskRCNNDetector.from_checkpoint(args.checkpoint) if args.checkpoint else None
+    if trained is not None:
+        c = trained.config
+        ms = median_ms(lambda: trained.detect(sample.rgb), args.repeats)
+        print(f"| {c.arch} (trained: {args.checkpoint}) | {c.max_size} x {c.min_size} | "
+              f"{sum(t.numel() for t in trained.model.parameters()) / 1e6:.1f} | {ms:.0f} |")
 
     estimator = PoseEstimator.from_pretrained()
     rows = [("oracle masks", PosePipeline(estimator), True)]
-    if args.checkpoint:
-        rows.append((f"Mask R-CNN {args.checkpoint}", PosePipeline(estimator, MaskRCNNDetector.from_checkpoint(args.checkpoint)), False))
+    if trained is not None:
+        rows.append((f"Mask R-CNN {args.checkpoint}", PosePipeline(estimator, trained), False))
     print("\n| pipeline | mushrooms estimated | ms / scene |")
     print("|---|---:|---:|")
     for name, pipeline, oracle in rows:
