@@ -2,8 +2,10 @@
 
 At reset the scene is rendered from its overhead camera (RGB, metric depth, instance labels),
 the detector's masks are cut out of the depth, and the pose network estimates each mushroom.
-With the default oracle detector the masks come from MuJoCo's segmentation render, so the pose
-network's error is what reaches the picker.
+Without a detector in the pipeline the masks come from MuJoCo's segmentation render (oracle), so
+the pose network's error is what reaches the picker. With a learned detector (e.g. a
+``MaskRCNNDetector``) the target's estimate is the one whose mask overlaps the target's visible
+mask best, with IoU >= 0.5; a missed target is a fallback like an unestimated one.
 
 If the target gets no estimate (hidden, or fewer points than the network needs) the source
 falls back to an upright stem through the target's cap top — a flagged outcome, counted in
@@ -18,12 +20,26 @@ import numpy as np
 
 from sms3d_env.pose_source import PoseEstimate
 
+MIN_TARGET_IOU = 0.5
+
+
+def _target_estimate(estimates: list[Any], target_mask: np.ndarray) -> list[Any]:
+    """The estimate whose mask overlaps ``target_mask`` best (IoU >= ``MIN_TARGET_IOU``), or none."""
+    best, best_iou = None, MIN_TARGET_IOU
+    for est in estimates:
+        mask = est.detection.mask
+        iou = (mask & target_mask).sum() / max((mask | target_mask).sum(), 1)
+        if iou >= best_iou:
+            best, best_iou = est, iou
+    return [] if best is None else [best]
+
 
 class PerceptionPose:
     """Callable pose source ``(scene, instance_id, rng) -> PoseEstimate`` using ``PosePipeline``.
 
     Args:
-        pipeline: a ``perception.pipeline.PosePipeline``; default: the shipped pose network.
+        pipeline: a ``perception.pipeline.PosePipeline``; default: the shipped pose network with
+            oracle masks. A pipeline built with a detector uses that detector's masks.
         part: which oracle masks feed the network, ``"mushroom"`` (whole visible mushroom, what
             the shipped network was trained on) or ``"cap"``.
     """
@@ -55,8 +71,13 @@ class PerceptionPose:
             self._renderer = SceneRenderer(cam.height, cam.width)
         frame = self._renderer.render(scene, amodal=False)
         labels = frame.labels_cap if self.part == "cap" else frame.labels_mushroom
-        detections = [d for d in detections_from_labels(labels) if d.instance_id == instance_id]
-        estimates = self._pipeline()(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, detections)
+        pipeline = self._pipeline()
+        if pipeline.detector is None:
+            detections = [d for d in detections_from_labels(labels) if d.instance_id == instance_id]
+            estimates = pipeline(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, detections)
+        else:
+            estimates = _target_estimate(
+                pipeline(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera), labels == instance_id + 1)
         truth = scene.instances[instance_id]
         if not estimates:
             self.fallbacks += 1
