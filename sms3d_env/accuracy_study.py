@@ -48,6 +48,7 @@ class SweepConfig:
     num_mushrooms: int = 25
     variants: tuple[str, ...] = ("default",)
     perception_episodes: int = 0  # episodes with the perception pose source (default physics)
+    perception_detector: str | None = None  # a train-detector checkpoint; None: segmentation masks
     chunk: int = 10  # episodes per task (one part file)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
 
@@ -100,6 +101,17 @@ def target_features(scene: Any, target: int) -> dict[str, float]:
     return {"tilt_deg": tilt, "cap_diameter": inst.cap_diameter, "nn_distance": nearest}
 
 
+def _perception_pipeline(detector_checkpoint: str | None) -> Any:
+    """The shipped pose network behind oracle masks, or behind a trained Mask R-CNN."""
+    if detector_checkpoint is None:
+        return None  # PerceptionPose's default
+    from perception.estimator import PoseEstimator
+    from perception.maskrcnn import MaskRCNNDetector
+    from perception.pipeline import PosePipeline
+
+    return PosePipeline(PoseEstimator.from_pretrained(), MaskRCNNDetector.from_checkpoint(detector_checkpoint))
+
+
 def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     """Run one task's episodes in this process and return one row per episode."""
     import gymnasium as gym
@@ -111,7 +123,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     if task.source == "perception":
         from sms3d_env.perception_source import PerceptionPose
 
-        source: Any = PerceptionPose()
+        source: Any = PerceptionPose(_perception_pipeline(config.perception_detector))
     else:
         source = "noisy"
     env = gym.make(
@@ -142,6 +154,22 @@ def _run_and_save(task: Task, config: SweepConfig, parts: Path) -> str:
     return task.name
 
 
+# Settings that change what a part file holds without changing its name: a folder's parts can
+# only be reused by a sweep that agrees on them (errors, episodes and variants may grow).
+RESUME_KEYS = ("seed", "num_mushrooms", "chunk", "env_kwargs", "perception_detector")
+
+
+def _check_resumable(path: Path, config: SweepConfig) -> None:
+    if not path.is_file():
+        return
+    stored = json.loads(path.read_text(encoding="utf-8"))
+    requested = json.loads(json.dumps(dataclasses.asdict(config), default=str))
+    differ = {k: (stored.get(k), requested[k]) for k in RESUME_KEYS if stored.get(k) != requested[k]}
+    if differ:
+        details = ", ".join(f"{k}: folder has {a!r}, requested {b!r}" for k, (a, b) in differ.items())
+        raise ValueError(f"{path.parent} holds a sweep with other settings ({details}); use another --out")
+
+
 def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
     """Run every task not already in ``out/parts`` and return all rows (ordered, deterministic)."""
     from tqdm.auto import tqdm
@@ -149,6 +177,7 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
     out = Path(out)
     parts = out / "parts"
     parts.mkdir(parents=True, exist_ok=True)
+    _check_resumable(out / "sweep_config.json", config)
     write_atomic(out / "sweep_config.json", json.dumps(dataclasses.asdict(config), sort_keys=True, default=str))
     tasks = plan_tasks(config)
     todo = [t for t in tasks if not (parts / f"{t.name}.json").exists()]
@@ -177,9 +206,13 @@ def _cmd_sweep(args: Any) -> int:
     config = SweepConfig(
         errors_deg=tuple(args.errors), episodes=args.episodes, seed=args.seed,
         num_mushrooms=args.num_mushrooms, variants=tuple(args.variants), chunk=args.chunk,
-        perception_episodes=args.perception_episodes,
+        perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
     )
-    rows = run_sweep(config, args.out, workers=args.workers)
+    try:
+        rows = run_sweep(config, args.out, workers=args.workers)
+    except ValueError as exc:
+        print(f"sms3d sweep: error: {exc}", file=sys.stderr)
+        return 2
     command = "sms3d " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["sweep"] else ""
     paths = write_report(rows, args.out, command)
     print(Path(paths["md"]).read_text(encoding="utf-8"))
@@ -199,6 +232,8 @@ def register(subparsers: Any) -> None:
                    help="physics settings to compare (sensitivity to unsourced assumptions)")
     p.add_argument("--perception-episodes", type=int, default=0,
                    help="also run this many episodes with the perception pose source (shipped network)")
+    p.add_argument("--perception-detector", help="train-detector checkpoint whose masks the perception episodes use "
+                                                  "(default: MuJoCo's segmentation masks)")
     p.add_argument("--chunk", type=int, default=10, help="episodes per resumable task")
     p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 1)), help="processes")
     p.set_defaults(func=_cmd_sweep)

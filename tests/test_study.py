@@ -1,4 +1,5 @@
 import csv
+import dataclasses
 import json
 
 import pytest
@@ -66,6 +67,11 @@ def test_small_sweep_resumes_and_reports(tmp_path):
     assert removed.read_text() == before
     again = [r for r in again if r["source"] == "noisy"]
     assert json.dumps(again, sort_keys=True) == json.dumps(rows, sort_keys=True)
+    # Parts made with other scenes or another detector are not reused.
+    with pytest.raises(ValueError, match="num_mushrooms"):
+        run_sweep(dataclasses.replace(config, num_mushrooms=9), tmp_path, progress=False)
+    with pytest.raises(ValueError, match="perception_detector"):
+        run_sweep(dataclasses.replace(config, perception_detector="det.pt"), tmp_path, progress=False)
     paths = write_report(rows + perception, tmp_path, "sms3d sweep ...")
     with open(paths["csv"]) as fh:
         assert len(list(csv.DictReader(fh))) == 5
