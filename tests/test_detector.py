@@ -133,6 +133,15 @@ def test_training_resumes_from_its_last_epoch(beds, tmp_path):
         train_detector(beds, tmp_path, DetectorConfig(arch="resnet50_fpn_v2", min_size=192, max_size=256), train, progress=False)
 
 
+def test_the_papers_resnet50_configuration_trains_from_scratch(beds, tmp_path):
+    config = DetectorConfig(arch="resnet50_fpn_v2", min_size=192, max_size=256)
+    log = train_detector(beds, tmp_path, config, DetectorTrainConfig(epochs=1, max_images=1, batch_size=1), progress=False)
+    assert np.isfinite(log[0]["train_loss"])
+    detector = MaskRCNNDetector.from_checkpoint(tmp_path / "best.pt")
+    assert detector.config.arch == "resnet50_fpn_v2"
+    detector.detect(read_scene_files(beds / scene_dirname(0)).rgb)
+
+
 def test_checkpoint_errors_are_named(tmp_path):
     path = save_detector(tmp_path / "d.pt", build_maskrcnn(SMALL), SMALL)
     with pytest.raises(CheckpointMismatchError, match="arch"):
