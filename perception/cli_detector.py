@@ -48,7 +48,8 @@ def _pipeline(args: argparse.Namespace):
     estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
     oracle = args.detector == "oracle"
     detector = None if oracle else MaskRCNNDetector.from_checkpoint(args.detector, score_threshold=args.score_threshold)
-    return PosePipeline(estimator, detector), oracle
+    soil = None if oracle or args.soil_margin_mm <= 0 else args.soil_margin_mm / 1000.0
+    return PosePipeline(estimator, detector, soil_margin_m=soil), oracle
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -113,6 +114,8 @@ def _pipeline_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--detector", default="oracle", help="'oracle' (segmentation render) or a train-detector checkpoint")
     p.add_argument("--weights", help="pose-network checkpoint (default: the shipped weights)")
     p.add_argument("--score-threshold", type=float, default=0.5, help="detections below this score are dropped")
+    p.add_argument("--soil-margin-mm", type=float, default=6.0,
+                   help="with a learned detector, drop mask pixels within this distance of the local soil depth (0: off)")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -66,15 +66,39 @@ def check_inputs(rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, wor
         raise PipelineInputError("world_from_camera: expected a 4 x 4 rigid transform")
 
 
-class PosePipeline:
-    """Detector + pose network. ``erode_px`` trims mask borders before back-projection. It is 0
-    by default because the shipped network was fine-tuned on un-eroded masks: eroding 1 px raised
-    its mean stem-axis error on held-out scenes from 9.2° to 12.5° (``sms3d eval-pipeline``)."""
+def above_soil(mask: np.ndarray, depth: np.ndarray, margin_m: float, ring_px: int = 6) -> np.ndarray:
+    """``mask`` without the pixels that lie at the local soil depth.
 
-    def __init__(self, estimator: PoseEstimator, detector: Detector | None = None, erode_px: int = 0) -> None:
+    A learned mask that spills over a mushroom's silhouette adds soil points, which tilt the
+    pose network's estimate. The soil depth is the median valid depth in a ring ``ring_px`` wide
+    around the mask; pixels deeper than that minus ``margin_m`` are dropped. Without valid depth
+    in the ring the mask is returned unchanged.
+    """
+    ring = cv2.dilate(mask.astype(np.uint8), np.ones((2 * ring_px + 1,) * 2, np.uint8)).astype(bool) & ~mask
+    around = depth[ring]
+    around = around[np.isfinite(around) & (around > 0)]
+    if around.size == 0:
+        return mask
+    return mask & (depth < float(np.median(around)) - margin_m)
+
+
+class PosePipeline:
+    """Detector + pose network.
+
+    ``soil_margin_m`` drops mask pixels within that distance of the local soil depth (see
+    ``above_soil``; ``None``, the default, keeps masks whole). It is for learned masks: with the
+    CPU-trained Mask R-CNN's it cut the mean stem-axis error on held-out scenes from 34° to 14°
+    (6 mm), while on exact masks it only loses points (9.2° -> 10.6°). ``erode_px`` trims mask borders; it
+    is 0 by default because the shipped network was fine-tuned on un-eroded masks (1 px of erosion
+    raised its error with exact masks from 9.2° to 12.5°).
+    """
+
+    def __init__(self, estimator: PoseEstimator, detector: Detector | None = None, erode_px: int = 0,
+                 soil_margin_m: float | None = None) -> None:
         self.estimator = estimator
         self.detector = detector
         self.erode_px = erode_px
+        self.soil_margin_m = soil_margin_m
 
     def __call__(self, rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, world_from_camera: np.ndarray,
                  detections: list[Detection] | None = None) -> list[MushroomEstimate]:
@@ -91,6 +115,8 @@ class PosePipeline:
         clouds, colours, kept = [], [], []
         for det in detections:
             mask = det.mask if kernel is None else cv2.erode(det.mask.astype(np.uint8), kernel).astype(bool)
+            if self.soil_margin_m is not None:
+                mask = above_soil(mask, depth, self.soil_margin_m)
             points, colors = depth_to_points(depth, intrinsics, mask, rgb)
             if len(points) < self.estimator.min_points:
                 continue

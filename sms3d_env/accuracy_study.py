@@ -109,7 +109,8 @@ def _perception_pipeline(detector_checkpoint: str | None) -> Any:
     from perception.maskrcnn import MaskRCNNDetector
     from perception.pipeline import PosePipeline
 
-    return PosePipeline(PoseEstimator.from_pretrained(), MaskRCNNDetector.from_checkpoint(detector_checkpoint))
+    return PosePipeline(PoseEstimator.from_pretrained(), MaskRCNNDetector.from_checkpoint(detector_checkpoint),
+                        soil_margin_m=0.006)  # learned masks spill onto the soil (see PosePipeline)
 
 
 def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:

@@ -6,7 +6,7 @@ from generator.camera import project
 from generator.dataset.render import SceneRenderer
 from perception.detector import detections_from_labels
 from perception.estimator import PoseEstimator
-from perception.pipeline import PipelineInputError, PosePipeline
+from perception.pipeline import PipelineInputError, PosePipeline, above_soil
 from perception.pose_net import PoseNet, PoseNetConfig
 
 
@@ -80,3 +80,13 @@ def test_bad_inputs_are_named(frame_and_scene, pipeline):
         pipeline(frame.rgb, frame.depth, frame.intrinsics, np.eye(3), [])
     with pytest.raises(ValueError, match="detector"):
         pipeline(*args[:4])
+
+
+def test_above_soil_trims_a_mask_that_spills_onto_the_soil():
+    depth = np.full((60, 80), 0.40, np.float32)  # soil 40 cm away
+    yy, xx = np.mgrid[:60, :80]
+    cap = (yy - 30) ** 2 + (xx - 40) ** 2 <= 10 ** 2
+    depth[cap] = 0.37  # a cap 3 cm above the soil
+    spilled = (yy - 30) ** 2 + (xx - 40) ** 2 <= 13 ** 2
+    assert np.array_equal(above_soil(spilled, depth, 0.006), cap)
+    assert np.array_equal(above_soil(cap, np.zeros_like(depth), 0.006), cap)  # no depth around: unchanged
