@@ -100,7 +100,7 @@ def cmd_show(args: argparse.Namespace) -> int:
     pipeline, oracle = _pipeline(args)
     sample = read_scene_files(Path(args.data) / scene_dirname(args.scene))
     estimates = run_scene(pipeline, sample, oracle)
-    out = estimates_figure(sample, estimates, args.out)
+    out = estimates_figure(sample, estimates, args.out, soil_margin_m=pipeline.soil_margin_m)
     print(f"wrote {out} ({len(estimates)} estimates)")
     return 0
 

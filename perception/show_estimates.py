@@ -22,7 +22,7 @@ from generator.dataset.show import BOX_EDGES
 from generator.files import write_atomic
 from generator.geometry import OrientedBox
 from perception.eval_pipeline import scene_intrinsics
-from perception.pipeline import MushroomEstimate
+from perception.pipeline import MushroomEstimate, above_soil
 from perception.pointcloud import depth_to_points
 
 TRUTH_RGB = (60, 220, 60)
@@ -52,8 +52,9 @@ def _draw_boxes(img: np.ndarray, boxes: list[OrientedBox], sample: SceneSample, 
 
 
 def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out_png: str | Path,
-                     elevation: float = 30.0, azimuth: float = -65.0) -> Path:
-    """Write the two-panel PNG (image overlay | 3D view) of ``estimates`` on ``sample``."""
+                     elevation: float = 30.0, azimuth: float = -65.0, soil_margin_m: float | None = None) -> Path:
+    """Write the two-panel PNG (image overlay | 3D view) of ``estimates`` on ``sample``; boxes are
+    sized from the masks trimmed as the pipeline trimmed them (``soil_margin_m``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -65,7 +66,10 @@ def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out
              if (sample.labels_mushroom == inst["id"] + 1).any()]
     predicted = []
     for est in estimates:
-        pts, _ = depth_to_points(sample.depth, intr, est.detection.mask)
+        mask = est.detection.mask
+        if soil_margin_m is not None:
+            mask = above_soil(mask, sample.depth, soil_margin_m)
+        pts, _ = depth_to_points(sample.depth, intr, mask)
         predicted.append(estimate_box(est, pts @ world[:3, :3].T + world[:3, 3]))
 
     overlay = sample.rgb.copy()
