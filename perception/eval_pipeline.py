@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from generator.camera import Intrinsics
 from generator.dataset.readers import SceneSample, read_scene_files
 from generator.dataset.writer import scene_dirname
 from generator.geometry import tilt_angle
@@ -111,11 +110,6 @@ class PipelineReport:
         return "\n".join(lines) + "\n"
 
 
-def scene_intrinsics(sample: SceneSample) -> Intrinsics:
-    k = sample.record["camera"]["intrinsics"]
-    return Intrinsics(**{name: k[name] for name in ("width", "height", "fx", "fy", "cx", "cy")})
-
-
 def ground_truth(sample: SceneSample, min_area: int = 16) -> list[GroundTruthMushroom]:
     """The scene's mushrooms with at least ``min_area`` visible pixels."""
     visible = {a["instance_id"]: a.get("visible_fraction", 0.0) for a in sample.annotations if a["category_id"] == 2}
@@ -161,7 +155,7 @@ def scene_indices(root: str | Path, split: str) -> list[int]:
 
 def run_scene(pipeline: PosePipeline, sample: SceneSample, oracle: bool) -> list[MushroomEstimate]:
     detections = detections_from_labels(sample.labels_mushroom) if oracle else None
-    return pipeline(sample.rgb, sample.depth, scene_intrinsics(sample), sample.world_from_camera, detections)
+    return pipeline(sample.rgb, sample.depth, sample.intrinsics, sample.world_from_camera, detections)
 
 
 def evaluate_pipeline(pipeline: PosePipeline, root: str | Path, split: str = "test", oracle: bool = False,

@@ -21,7 +21,6 @@ from generator.dataset.readers import SceneSample
 from generator.dataset.show import BOX_EDGES
 from generator.files import write_atomic
 from generator.geometry import OrientedBox
-from perception.eval_pipeline import scene_intrinsics
 from perception.pipeline import MushroomEstimate, above_soil
 from perception.pointcloud import depth_to_points
 
@@ -41,7 +40,7 @@ def estimate_box(estimate: MushroomEstimate, points_world: np.ndarray) -> Orient
 
 
 def _draw_boxes(img: np.ndarray, boxes: list[OrientedBox], sample: SceneSample, colour: tuple[int, int, int]) -> None:
-    intr = scene_intrinsics(sample)
+    intr = sample.intrinsics
     for box in boxes:
         uvz = project(box.corners, sample.world_from_camera, intr)
         if np.any(uvz[:, 2] <= 0):
@@ -60,7 +59,7 @@ def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    intr = scene_intrinsics(sample)
+    intr = sample.intrinsics
     world = sample.world_from_camera
     truth = [OrientedBox.from_dict(inst["cap_obb"]) for inst in sample.record["instances"]
              if (sample.labels_mushroom == inst["id"] + 1).any()]

@@ -20,6 +20,7 @@ import torch
 from pycocotools import mask as mask_utils
 from torch.utils.data import Dataset
 
+from generator.camera import Intrinsics
 from generator.dataset.backproject import backproject
 from generator.dataset.errors import CorruptFileError
 from generator.dataset.writer import DEPTH_SCALE, DONE, FILES, scene_dirname
@@ -52,6 +53,11 @@ class SceneSample:
     @property
     def world_from_camera(self) -> np.ndarray:
         return np.asarray(self.record["camera"]["world_from_camera"], dtype=np.float64)
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        k = self.record["camera"]["intrinsics"]
+        return Intrinsics(**{name: k[name] for name in ("width", "height", "fx", "fy", "cx", "cy")})
 
 
 def _read_bytes(path: Path) -> bytes:

@@ -7,7 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from generator.camera import Intrinsics, project
+from generator.camera import project
 from generator.dataset.errors import DatasetWriteError
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
@@ -40,7 +40,7 @@ def overlay(root: str | Path, index: int, labels: str = "mushroom", alpha: float
     fg = lab > 0
     img[fg] = (1 - alpha) * img[fg] + alpha * colours[lab[fg]]
     img = img.astype(np.uint8)
-    intr = Intrinsics(**{k: s.record["camera"]["intrinsics"][k] for k in ("width", "height", "fx", "fy", "cx", "cy")})
+    intr = s.intrinsics
     pose = s.world_from_camera
     for inst in s.record["instances"]:
         box = OrientedBox.from_dict(inst["cap_obb"])
