@@ -9,11 +9,8 @@ current, which happens when training starts after an environment or a view rende
 from __future__ import annotations
 
 import importlib.util
-import os
 
 import mujoco
-
-os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def _preload_triton() -> None:
