@@ -28,6 +28,11 @@ class Detection:
         return int(self.mask.sum())
 
 
+def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two boolean masks (0 when both are empty)."""
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
 class Detector(Protocol):
     def detect(self, rgb: np.ndarray) -> list[Detection]: ...
 

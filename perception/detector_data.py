@@ -15,9 +15,9 @@ from typing import Any
 import cv2
 import numpy as np
 import torch
-from pycocotools import mask as mask_utils
 from torch.utils.data import Dataset
 
+from generator.dataset.coco import decode_mask
 from generator.dataset.errors import CorruptFileError
 from perception.maskrcnn import CATEGORIES
 
@@ -38,11 +38,6 @@ def load_coco(root: str | Path, split: str) -> dict[str, Any]:
     except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
         raise CorruptFileError(path, f"not a COCO instance file ({exc})") from exc
     return data
-
-
-def decode_rle(rle: dict[str, Any]) -> np.ndarray:
-    counts = rle["counts"]
-    return mask_utils.decode({"size": rle["size"], "counts": counts.encode("ascii") if isinstance(counts, str) else counts}).astype(bool)
 
 
 class CocoDetectionDataset(Dataset):
@@ -86,7 +81,7 @@ class CocoDetectionDataset(Dataset):
         masks = np.zeros((len(anns), h, w), np.uint8)
         boxes = np.zeros((len(anns), 4), np.float32)
         for k, ann in enumerate(anns):
-            masks[k] = decode_rle(ann["segmentation"])
+            masks[k] = decode_mask(ann["segmentation"])
             x, y, bw, bh = ann["bbox"]
             boxes[k] = (x, y, x + bw, y + bh)
         return {"boxes": torch.from_numpy(boxes), "labels": torch.ones(len(anns), dtype=torch.int64),

@@ -19,7 +19,7 @@ import numpy as np
 from generator.dataset.readers import SceneSample, read_scene_files
 from generator.dataset.writer import scene_dirname
 from generator.geometry import tilt_angle
-from perception.detector import detections_from_labels
+from perception.detector import detections_from_labels, mask_iou
 from perception.detector_data import load_coco
 from perception.pipeline import MushroomEstimate, PosePipeline
 
@@ -136,8 +136,7 @@ def match(estimates: list[MushroomEstimate], truth: list[GroundTruthMushroom], m
     taken = np.zeros(len(truth), bool)
     for est in sorted(estimates, key=lambda e: -e.detection.score):
         m = est.detection.mask
-        ious = np.array([(m & g.mask).sum() / max((m | g.mask).sum(), 1) if not taken[j] else 0.0
-                         for j, g in enumerate(truth)])
+        ious = np.array([0.0 if taken[j] else mask_iou(m, g.mask) for j, g in enumerate(truth)])
         if not truth or ious.max() < min_iou:
             continue
         j = int(ious.argmax())

@@ -26,9 +26,10 @@ MIN_TARGET_IOU = 0.5
 def _target_estimate(estimates: list[Any], target_mask: np.ndarray) -> list[Any]:
     """The estimate whose mask overlaps ``target_mask`` best (IoU >= ``MIN_TARGET_IOU``), or none."""
     best, best_iou = None, MIN_TARGET_IOU
+    from perception.detector import mask_iou
+
     for est in estimates:
-        mask = est.detection.mask
-        iou = (mask & target_mask).sum() / max((mask | target_mask).sum(), 1)
+        iou = mask_iou(est.detection.mask, target_mask)
         if iou >= best_iou:
             best, best_iou = est, iou
     return [] if best is None else [best]

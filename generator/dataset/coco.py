@@ -67,6 +67,12 @@ def encode_labels(labels: np.ndarray) -> dict[int, dict[str, Any]]:
             for k, a, b in zip(labels_present, bounds[:-1], bounds[1:])}
 
 
+def decode_mask(rle: dict[str, Any]) -> np.ndarray:
+    """Boolean mask of a COCO RLE whose ``counts`` is text (as written here) or bytes."""
+    counts = rle["counts"]
+    return mask_utils.decode({"size": rle["size"], "counts": counts.encode("ascii") if isinstance(counts, str) else counts}).astype(bool)
+
+
 def rle_area_bbox(rle: dict[str, Any]) -> tuple[int, list[float]]:
     coded = {"size": rle["size"], "counts": rle["counts"].encode("ascii")}
     return int(mask_utils.area(coded)), [float(x) for x in mask_utils.toBbox(coded)]

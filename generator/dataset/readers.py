@@ -17,11 +17,11 @@ from typing import Any
 import cv2
 import numpy as np
 import torch
-from pycocotools import mask as mask_utils
 from torch.utils.data import Dataset
 
 from generator.camera import Intrinsics
 from generator.dataset.backproject import backproject
+from generator.dataset.coco import decode_mask
 from generator.dataset.errors import CorruptFileError
 from generator.dataset.writer import DEPTH_SCALE, DONE, FILES, scene_dirname
 from generator.errors import SceneFormatError
@@ -107,8 +107,7 @@ def read_scene_files(scene_dir: str | Path, verify: bool = True) -> SceneSample:
     lc = _png(folder / "labels_cap.png", raw["labels_cap.png"], np.uint16, 1, (h, w))
     amodal_rle = _json(folder / "amodal_caps.json", raw["amodal_caps.json"])
     try:
-        amodal = {int(k): mask_utils.decode({"size": v["size"], "counts": v["counts"].encode()}).astype(bool)
-                  for k, v in amodal_rle.items()}
+        amodal = {int(k): decode_mask(v) for k, v in amodal_rle.items()}
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise CorruptFileError(folder / "amodal_caps.json", f"bad RLE ({exc})") from exc
     anns = _json(folder / "annotations.json", raw["annotations.json"])
