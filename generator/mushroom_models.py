@@ -160,10 +160,26 @@ def build_model(species: Species, model_id: int, rng: np.random.Generator) -> Mu
 @cache
 def model_library(species: Species) -> tuple[MushroomModel, ...]:
     """The built-in models of a species (fixed seed: the same meshes on every machine)."""
+    rng = np.random.default_rng(_species_index(species))
+    return tuple(build_model(species, i, rng) for i in range(MODELS_PER_SPECIES))
+
+
+def _species_index(species: str) -> int:
     if species not in COLOURS:
         raise ValueError(f"unknown species {species!r}; expected 'white' or 'brown'")
-    rng = np.random.default_rng(0 if species == "white" else 1)
-    return tuple(build_model(species, i, rng) for i in range(MODELS_PER_SPECIES))
+    return 0 if species == "white" else 1
+
+
+def procedural_models(species: Species, n: int, seed: int) -> tuple[MushroomModel, ...]:
+    """``n`` more models of ``species`` drawn like the library's, from their own seed stream.
+
+    For training pose networks on many shapes rather than the library's seven; ids continue
+    after the library's (``MODELS_PER_SPECIES``, ...), and no seed reproduces a library model.
+    """
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"n: must be an int >= 1, got {n!r}")
+    rng = np.random.default_rng([seed, _species_index(species), 1])
+    return tuple(build_model(species, MODELS_PER_SPECIES + i, rng) for i in range(n))
 
 
 def mushroom_mass(species: Species, cap_diameter: float) -> float:

@@ -46,7 +46,7 @@ def default_variants(base_points: int = 1024, points: Sequence[int] = (64, 256, 
     base = PoseNetConfig(num_points=base_points)
     out = [Variant("default", base)]
     out += [Variant("points", PoseNetConfig(num_points=n)) for n in points]
-    out += [Variant("head", PoseNetConfig(head=h, num_points=base_points)) for h in ("9d", "quat", "euler")]
+    out += [Variant("head", PoseNetConfig(head=h, num_points=base_points)) for h in ("6d_stem", "9d", "quat", "euler")]
     out += [Variant("rgb", PoseNetConfig(use_rgb=True, num_points=base_points))]
     out += [Variant("backbone", PoseNetConfig(backbone=b, num_points=base_points)) for b in ("pointnet", "pointnet2")]
     seen, unique = set(), []

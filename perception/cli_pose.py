@@ -25,8 +25,8 @@ import torch
 
 from perception.data import PointCloudPoseDataset, load_samples, samples_from_scenes, save_samples
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
-from perception.pose_net import PoseNetConfig, load_checkpoint
-from perception.synthetic_views import default_models, generate_samples
+from perception.pose_net import HEAD_DIMS, PoseNetConfig, load_checkpoint
+from perception.synthetic_views import default_models, generate_samples, procedural_mesh_models
 from perception.train import TrainConfig, evaluate, train
 
 DEFAULT_TRAIN_MODEL_IDS = (0, 1, 2, 3, 4, 5)  # model 6 of each species is held out
@@ -39,15 +39,20 @@ def _ids(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"expected comma-separated ints, got {text!r}") from exc
 
 
-def _samples(data: str | None, n: int, seed: int, model_ids: Sequence[int] | None, cache: Path | None, label: str):
+def _samples(
+    data: str | None, n: int, seed: int, model_ids: Sequence[int] | None, cache: Path | None, label: str,
+    procedural: int = 0,
+):  # fmt: skip
     if data:
         return load_samples(data)
+    shapes = f"procedural{procedural}" if procedural else f"models{'-'.join(map(str, model_ids or []))}"
     if cache is not None:
-        path = cache / f"{label}_n{n}_seed{seed}_models{'-'.join(map(str, model_ids or []))}.npz"
+        path = cache / f"{label}_n{n}_seed{seed}_{shapes}.npz"
         if path.exists():
             return load_samples(path)
     t = time.perf_counter()
-    samples = generate_samples(n, seed, default_models(model_ids=model_ids))
+    models = procedural_mesh_models(procedural, seed) if procedural else default_models(model_ids=model_ids)
+    samples = generate_samples(n, seed, models)
     print(f"rendered {n} {label} views (seed {seed}) in {time.perf_counter() - t:.1f} s", file=sys.stderr)
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
@@ -77,17 +82,20 @@ def cmd_train(args: argparse.Namespace) -> int:
         val_s = samples_from_scenes(args.scenes, "val", cap_only=args.cap_only, seed=args.seed + 1)
         if args.add_synthetic:
             train_s = train_s + _samples(
-                None, args.add_synthetic, args.seed * 1000 + 1, args.model_ids, cache, "train"
+                None, args.add_synthetic, args.seed * 1000 + 1, args.model_ids, cache, "train", args.procedural_models
             )
         print(f"training on {len(train_s)} instances, validating on {len(val_s)}", file=sys.stderr)
     else:
-        train_s = _samples(args.data, args.num_train, args.seed * 1000 + 1, args.model_ids, cache, "train")
+        train_s = _samples(
+            args.data, args.num_train, args.seed * 1000 + 1, args.model_ids, cache, "train", args.procedural_models
+        )
         val_s = _samples(args.val_data, args.num_val, args.seed * 1000 + 2, args.model_ids, cache, "val")
     tr = PointCloudPoseDataset(train_s, net.num_points, net.use_rgb, cfg.augment, seed=args.seed)
     va = PointCloudPoseDataset(val_s, net.num_points, net.use_rgb, None, seed=args.seed + 1)
     t = time.perf_counter()
     try:
-        _, rows = train(net, cfg, tr, va, args.out, resume=args.resume, init=args.init)
+        _, rows = train(net, cfg, tr, va, args.out, resume=args.resume, init=args.init,
+                        init_backbone=args.init_backbone)
     except (CheckpointMismatchError, CheckpointFormatError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -118,7 +126,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("train-pose", help="train the pose network on rendered single-mushroom views")
     p.add_argument("--out", required=True, help="output folder (checkpoints, log.csv)")
     p.add_argument("--backbone", default="point_transformer", choices=("point_transformer", "pointnet", "pointnet2"))
-    p.add_argument("--head", default="6d", choices=("6d", "9d", "quat", "euler"))
+    p.add_argument("--head", default="6d", choices=sorted(HEAD_DIMS))
     p.add_argument("--rgb", action="store_true", help="feed RGB with the points")
     p.add_argument("--num-points", type=int, default=1024)
     p.add_argument("--epochs", type=int, default=50)
@@ -129,6 +137,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--num-train", type=int, default=4000)
     p.add_argument("--num-val", type=int, default=500)
     p.add_argument("--model-ids", type=_ids, default=DEFAULT_TRAIN_MODEL_IDS, help="generator model ids to render")
+    p.add_argument(
+        "--procedural-models", type=int, default=0, metavar="N",
+        help="render training views of N fresh procedural shapes per species (seeded by --seed) instead of "
+             "the library's --model-ids; validation views stay on --model-ids",
+    )  # fmt: skip
     p.add_argument("--data", help="training samples .npz (perception.data format) instead of rendering")
     p.add_argument("--val-data", help="validation samples .npz")
     p.add_argument("--scenes", help="rendered scene dataset folder (generator.dataset): its train/val splits")
@@ -142,6 +155,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     p.add_argument("--init", help="start from this checkpoint's weights (fine-tune; same network config)")
+    p.add_argument(
+        "--init-backbone", metavar="CHECKPOINT",
+        help="start from this checkpoint's backbone and hidden head layer; a fresh output layer (e.g. another --head)",
+    )  # fmt: skip
     p.add_argument(
         "--add-synthetic", type=int, default=0, metavar="N",
         help="with --scenes: also train on N rendered single-mushroom views (seed SEED*1000+1, --model-ids)",

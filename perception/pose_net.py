@@ -2,7 +2,8 @@
 
 The input is a normalised per-mushroom cloud ``(B, N, 3)`` in the camera frame (``(B, N, 6)``
 with RGB in [0, 1] when ``use_rgb``); the output is ``(B, 3, 3)`` camera-from-mushroom rotations
-whose third column is the stem axis. Heads: ``"6d"`` (Gram–Schmidt), ``"9d"`` (SVD),
+whose third column is the stem axis. Heads: ``"6d"`` (Gram–Schmidt), ``"6d_stem"`` (Gram–Schmidt
+with the stem axis as the first, directly normalised vector), ``"9d"`` (SVD),
 ``"quat"`` (unit quaternion), ``"euler"`` (xyz angles). Checkpoints store the config, so a
 network is always rebuilt with the shape it was trained with.
 """
@@ -23,16 +24,18 @@ from perception import rotations as rot
 from perception.backbones import BACKBONES, build_backbone
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 
-Head = Literal["6d", "9d", "quat", "euler"]
-HEAD_DIMS: dict[str, int] = {"6d": 6, "9d": 9, "quat": 4, "euler": 3}
+Head = Literal["6d", "6d_stem", "9d", "quat", "euler"]
+HEAD_DIMS: dict[str, int] = {"6d": 6, "6d_stem": 6, "9d": 9, "quat": 4, "euler": 3}
 _DECODERS = {
     "6d": rot.rotation_6d_to_matrix,
+    "6d_stem": rot.rotation_6d_stem_to_matrix,
     "9d": rot.rotation_9d_to_matrix,
     "quat": rot.quaternion_to_matrix,
     "euler": rot.euler_to_matrix,
 }
 _UPRIGHT_BIAS = {
     "6d": torch.tensor([1.0, 0, 0, 0, -1.0, 0]),
+    "6d_stem": torch.tensor([0.0, 0, -1.0, 1.0, 0, 0]),
     "9d": torch.tensor([1.0, 0, 0, 0, -1.0, 0, 0, 0, -1.0]),
     "quat": torch.tensor([0.0, 1.0, 0, 0]),  # pi about x
     "euler": torch.tensor([torch.pi, 0.0, 0.0]),  # roll = pi
@@ -168,16 +171,36 @@ def load_checkpoint(
     payload = read_checkpoint(path)
     stored = PoseNetConfig.from_dict(payload["config"])
     if config is not None:
-        mism = {
-            f.name: (getattr(stored, f.name), getattr(config, f.name))
-            for f in dataclasses.fields(PoseNetConfig)
-            if getattr(stored, f.name) != getattr(config, f.name)
-        }
-        if mism:
-            raise CheckpointMismatchError(str(path), mism)
+        _check_fields(path, stored, config, [f.name for f in dataclasses.fields(PoseNetConfig)])
     model = PoseNet(stored)
     try:
         model.load_state_dict(payload["state_dict"])
     except RuntimeError as exc:
         raise CheckpointFormatError(f"{path}: weights do not fit config {stored} ({exc})") from exc
     return model.to(map_location).eval(), payload.get("extra", {})
+
+
+#: Parameters of the rotation head's output layer, the only ones that depend on the head type.
+_OUTPUT_LAYER = ("head.2.weight", "head.2.bias")
+
+
+def load_backbone(model: PoseNet, path: str | Path) -> None:
+    """Copy the backbone and the head's hidden layer stored at ``path`` into ``model``.
+
+    The output layer keeps its fresh (upright-prior) initialisation, so a trained backbone can
+    start a network with another rotation head (or re-learn its own). The backbone type, RGB
+    input and hidden width must match, else :class:`CheckpointMismatchError`.
+    """
+    payload = read_checkpoint(path)
+    stored = PoseNetConfig.from_dict(payload["config"])
+    _check_fields(path, stored, model.config, ["backbone", "use_rgb", "hidden"])
+    state = {k: v for k, v in payload["state_dict"].items() if k not in _OUTPUT_LAYER}
+    missing, unexpected = model.load_state_dict(state, strict=False)
+    if sorted(missing) != sorted(_OUTPUT_LAYER) or unexpected:
+        raise CheckpointFormatError(f"{path}: weights do not fit a {stored.backbone} backbone ({missing=}, {unexpected=})")
+
+
+def _check_fields(path: str | Path, stored: PoseNetConfig, wanted: PoseNetConfig, names: list[str]) -> None:
+    mism = {n: (getattr(stored, n), getattr(wanted, n)) for n in names if getattr(stored, n) != getattr(wanted, n)}
+    if mism:
+        raise CheckpointMismatchError(str(path), mism)

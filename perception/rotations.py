@@ -7,6 +7,7 @@ shape and are differentiable unless stated otherwise.
 Conventions:
 - 6D: the first two columns of ``R`` stacked as ``(..., 6) = [c0, c1]``; decoded by Gram–Schmidt
   (Zhou et al., CVPR 2019, "On the Continuity of Rotation Representations in Neural Networks").
+- 6D stem-first: ``[c2, c0]``, the stem axis first, decoded by the same Gram–Schmidt.
 - 9D: any ``(..., 9)`` row-major 3x3 matrix, projected to the nearest rotation by SVD with
   ``det = +1`` (Levinson et al. 2020).
 - Quaternion: ``(w, x, y, z)``, scalar first; decoding normalises.
@@ -35,6 +36,14 @@ def _check_last(x: torch.Tensor, shape: tuple[int, ...], name: str) -> None:
 
 
 # --------------------------------------------------------------------------- 6D (Gram–Schmidt)
+def _gram_schmidt(a1: torch.Tensor, a2: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Orthonormal right-handed ``(b1, b2, b1 × b2)`` with ``b1 ∥ a1`` and ``b2`` in ``span(a1, a2)``."""
+    b1 = torch.nn.functional.normalize(a1, dim=-1, eps=_DEFAULT_EPS)
+    b2 = a2 - (b1 * a2).sum(-1, keepdim=True) * b1
+    b2 = torch.nn.functional.normalize(b2, dim=-1, eps=_DEFAULT_EPS)
+    return b1, b2, torch.linalg.cross(b1, b2, dim=-1)
+
+
 def rotation_6d_to_matrix(d6: torch.Tensor) -> torch.Tensor:
     """Decode ``(..., 6)`` = two 3-vectors into a rotation by Gram–Schmidt.
 
@@ -42,18 +51,33 @@ def rotation_6d_to_matrix(d6: torch.Tensor) -> torch.Tensor:
     result are ``[b1, b2, b3]`` so that ``matrix_to_rotation_6d`` inverts it exactly.
     """
     _check_last(d6, (6,), "d6")
-    a1, a2 = d6[..., :3], d6[..., 3:]
-    b1 = torch.nn.functional.normalize(a1, dim=-1, eps=_DEFAULT_EPS)
-    b2 = a2 - (b1 * a2).sum(-1, keepdim=True) * b1
-    b2 = torch.nn.functional.normalize(b2, dim=-1, eps=_DEFAULT_EPS)
-    b3 = torch.linalg.cross(b1, b2, dim=-1)
-    return torch.stack((b1, b2, b3), dim=-1)
+    return torch.stack(_gram_schmidt(d6[..., :3], d6[..., 3:]), dim=-1)
 
 
 def matrix_to_rotation_6d(R: torch.Tensor) -> torch.Tensor:
     """The first two columns of ``R`` as ``(..., 6)``."""
     _check_last(R, (3, 3), "R")
     return torch.cat((R[..., :, 0], R[..., :, 1]), dim=-1)
+
+
+def rotation_6d_stem_to_matrix(d6: torch.Tensor) -> torch.Tensor:
+    """Decode ``(..., 6)`` = ``[stem axis, x axis]`` by Gram–Schmidt with the stem axis first.
+
+    ``z = a1/|a1|``, ``x = normalise(a2 - (z·a2) z)``, ``y = z × x``; columns ``[x, y, z]``.
+    The same 6D representation as :func:`rotation_6d_to_matrix` with the third column taken
+    first, so the stem axis is a normalised output of its own: yaw about the stem, which a
+    near-round cap hides, only moves ``x`` and ``y``. In the plain 6D decoding the stem axis is
+    the cross product of the two yaw-dependent columns.
+    """
+    _check_last(d6, (6,), "d6")
+    z, x, y = _gram_schmidt(d6[..., :3], d6[..., 3:])
+    return torch.stack((x, y, z), dim=-1)
+
+
+def matrix_to_rotation_6d_stem(R: torch.Tensor) -> torch.Tensor:
+    """The stem axis (third column) and the first column of ``R`` as ``(..., 6)``."""
+    _check_last(R, (3, 3), "R")
+    return torch.cat((R[..., :, 2], R[..., :, 0]), dim=-1)
 
 
 # --------------------------------------------------------------------------- 9D (SVD)

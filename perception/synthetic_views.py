@@ -82,19 +82,27 @@ class MeshModel:
 
 def default_models(species: Sequence[str] = ("white", "brown"), model_ids: Sequence[int] | None = None) -> list[MeshModel]:
     """The generator's procedural model library as :class:`MeshModel` s."""
-    from generator.mushroom_models import COLOURS, model_library
+    from generator.mushroom_models import model_library
 
-    out = []
-    for sp in species:
-        for m in model_library(sp):
-            if model_ids is not None and m.model_id not in model_ids:
-                continue
-            out.append(
-                MeshModel(m.name, m.mesh, m.cap_bottom_z, tuple(COLOURS[sp]["cap"][:3]), tuple(COLOURS[sp]["stem"][:3]), m.cap_diameter)
-            )
+    out = [_mesh_model(m) for sp in species for m in model_library(sp) if model_ids is None or m.model_id in model_ids]
     if not out:
         raise PerceptionConfigError("model_ids", f"no models selected from {list(species)} / {model_ids}")
     return out
+
+
+def procedural_mesh_models(n_per_species: int, seed: int, species: Sequence[str] = ("white", "brown")) -> list[MeshModel]:
+    """``n_per_species`` fresh procedural shapes of each species
+    (:func:`generator.mushroom_models.procedural_models`), none of them a library model."""
+    from generator.mushroom_models import procedural_models
+
+    return [_mesh_model(m) for sp in species for m in procedural_models(sp, n_per_species, seed)]
+
+
+def _mesh_model(m) -> MeshModel:
+    from generator.mushroom_models import COLOURS
+
+    colours = COLOURS[m.species]
+    return MeshModel(m.name, m.mesh, m.cap_bottom_z, tuple(colours["cap"][:3]), tuple(colours["stem"][:3]), m.cap_diameter)
 
 
 @cache

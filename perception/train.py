@@ -31,6 +31,7 @@ from perception.pose_net import (
     PoseNet,
     PoseNetConfig,
     atomic_torch_save,
+    load_backbone,
     load_checkpoint,
     save_checkpoint,
 )
@@ -132,6 +133,7 @@ def train(
     resume: bool = False,
     on_epoch: Callable[[dict[str, float]], None] | None = None,
     init: str | Path | None = None,
+    init_backbone: str | Path | None = None,
 ) -> tuple[PoseNet, list[dict[str, float]]]:
     """Train and return ``(best model in eval mode, per-epoch log rows)``.
 
@@ -141,7 +143,8 @@ def train(
 
     With ``init``, training starts from the weights of that checkpoint (fine-tuning; its network
     config must equal ``net_config``, else :class:`CheckpointMismatchError`); a resumed run
-    ignores it.
+    ignores it. With ``init_backbone``, only that checkpoint's backbone and hidden head layer are
+    loaded (:func:`~perception.pose_net.load_backbone`): the way to change the rotation head.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -150,6 +153,8 @@ def train(
     model = PoseNet(net_config).to(device)
     if init is not None:
         model, _ = load_checkpoint(init, net_config, map_location=device)
+    if init_backbone is not None:
+        load_backbone(model, init_backbone)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(
         opt, mode="min", factor=cfg.plateau_factor, patience=cfg.plateau_patience, min_lr=cfg.min_lr
@@ -168,7 +173,8 @@ def train(
         random.setstate(state["python_rng"])
     (out / "train_config.json").write_text(
         json.dumps(
-            {"net": net_config.to_dict(), "train": cfg.to_dict(), "init": None if init is None else str(init)},
+            {"net": net_config.to_dict(), "train": cfg.to_dict(), "init": None if init is None else str(init),
+             "init_backbone": None if init_backbone is None else str(init_backbone)},
             indent=2, default=str,
         )
     )

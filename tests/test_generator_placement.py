@@ -97,6 +97,23 @@ def test_models_are_watertight_and_shaped():
             assert 0.25 < 2 * stem_r / model.cap_diameter < 0.5  # stem a third of the cap across
 
 
+def test_procedural_models_are_seeded_new_shapes():
+    from generator.mushroom_models import MODELS_PER_SPECIES, procedural_models
+
+    library = {round(m.cap_diameter, 9) for m in model_library("white")}
+    first, again, other = (procedural_models("white", 12, seed) for seed in (3, 3, 4))
+    assert [m.model_id for m in first] == list(range(MODELS_PER_SPECIES, MODELS_PER_SPECIES + 12))
+    assert [m.cap_diameter for m in first] == [m.cap_diameter for m in again]  # determined by the seed
+    assert {m.cap_diameter for m in first}.isdisjoint(m.cap_diameter for m in other)
+    assert library.isdisjoint(round(m.cap_diameter, 9) for m in first)  # none is a library model
+    for m in first:
+        assert m.mesh.is_watertight and 0.025 <= m.cap_diameter <= 0.040  # the library's ranges
+    with pytest.raises(ValueError, match="species"):
+        procedural_models("oyster", 2, 0)
+    with pytest.raises(ValueError, match="n:"):
+        procedural_models("brown", 0, 0)
+
+
 def test_proxies_bracket_every_model():
     from generator.overlap import model_solid
 

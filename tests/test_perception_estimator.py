@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from perception.errors import NoEstimate
+from perception.errors import NoEstimate, PerceptionConfigError
 from perception.estimator import PoseEstimator, default_weights_path
 from perception.pointcloud import depth_to_points
 from perception.synthetic_views import ViewConfig, default_models, generate_samples
@@ -61,3 +61,20 @@ def test_too_few_points_gives_no_estimate(estimator: PoseEstimator) -> None:
     assert info.value.num_points == 7
     assert estimator.estimate_or_none(pts) is None
     assert estimator.estimate_or_none(np.zeros((0, 3))) is None
+
+
+def test_test_time_views_are_turns_about_the_optical_axis() -> None:
+    # With FPS sampling every pass reads the same points, so turning the cloud a quarter turn
+    # about the optical axis only permutes the 4 passes: the averaged estimate turns with it.
+    est = PoseEstimator.from_pretrained(sampling="fps", views=4)
+    s = generate_samples(3, seed=11, models=default_models(model_ids=(2,)))
+    quarter = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    plain = est.estimate_batch([x.points for x in s])
+    turned = est.estimate_batch([x.points @ quarter.T for x in s])
+    for a, b in zip(plain, turned, strict=True):
+        np.testing.assert_allclose(b.rotation, quarter @ a.rotation, atol=2e-3)
+        assert np.allclose(a.rotation.T @ a.rotation, np.eye(3), atol=1e-9) and np.linalg.det(a.rotation) > 0
+    one = PoseEstimator.from_pretrained(sampling="fps").estimate(s[0].points)
+    assert np.degrees(np.arccos(np.clip(one.stem_axis @ plain[0].stem_axis, -1, 1))) < 10.0
+    with pytest.raises(PerceptionConfigError, match="views"):
+        PoseEstimator.from_pretrained(views=0)

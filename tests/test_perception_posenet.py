@@ -7,7 +7,7 @@ import torch
 
 from perception.backbones import BACKBONES
 from perception.errors import CheckpointMismatchError, PerceptionConfigError
-from perception.pose_net import PoseNet, PoseNetConfig, load_checkpoint, save_checkpoint
+from perception.pose_net import HEAD_DIMS, PoseNet, PoseNetConfig, load_backbone, load_checkpoint, save_checkpoint
 
 
 @pytest.mark.parametrize("name", sorted(BACKBONES))
@@ -21,7 +21,7 @@ def test_backbone_is_invariant_to_point_order(name: str) -> None:
     assert torch.allclose(a, b, atol=1e-4)
 
 
-@pytest.mark.parametrize("head", ["6d", "9d", "quat", "euler"])
+@pytest.mark.parametrize("head", sorted(HEAD_DIMS))
 @pytest.mark.parametrize("use_rgb", [False, True])
 def test_heads_output_rotations(head: str, use_rgb: bool) -> None:
     net = PoseNet(backbone="pointnet", head=head, use_rgb=use_rgb, num_points=64).eval()
@@ -68,3 +68,22 @@ def test_checkpoint_round_trip_and_mismatch(tmp_path) -> None:
     assert set(info.value.mismatches) == {"head"}
     assert "head" in str(info.value) and "'quat'" in str(info.value)
     assert not list(tmp_path.glob("*.tmp"))  # atomic write left no temporary file
+
+
+def test_load_backbone_switches_the_head_and_names_mismatches(tmp_path) -> None:
+    torch.manual_seed(0)
+    trained = PoseNet(backbone="pointnet", head="6d", num_points=64)
+    path = tmp_path / "ckpt.pt"
+    save_checkpoint(path, trained)
+    net = PoseNet(backbone="pointnet", head="6d_stem", num_points=128)
+    load_backbone(net, path)
+    x = torch.rand(2, 128, 3)
+    with torch.no_grad():
+        assert torch.equal(net.backbone(x), trained.backbone(x))
+        assert torch.equal(net.head[0].weight, trained.head[0].weight)
+        # The output layer starts at the upright prior: R = diag(1, -1, -1) for every input.
+        net.head[-1].weight.zero_()
+        assert torch.allclose(net(x), torch.diag(torch.tensor([1.0, -1.0, -1.0])).expand(2, 3, 3), atol=1e-6)
+    with pytest.raises(CheckpointMismatchError) as info:
+        load_backbone(PoseNet(backbone="pointnet2", head="6d", num_points=64), path)
+    assert set(info.value.mismatches) == {"backbone"}

@@ -24,6 +24,7 @@ def _assert_rotations(M: torch.Tensor) -> None:
 def test_gram_schmidt_and_svd_give_rotations() -> None:
     g = torch.Generator().manual_seed(1)
     _assert_rotations(rot.rotation_6d_to_matrix(torch.randn(500, 6, generator=g)))
+    _assert_rotations(rot.rotation_6d_stem_to_matrix(torch.randn(500, 6, generator=g)))
     # Random 9D inputs include reflections (det < 0); SVD projection must still give det = +1.
     m9 = torch.randn(500, 9, generator=g)
     assert (torch.det(m9.view(-1, 3, 3)) < 0).any()
@@ -34,6 +35,7 @@ def test_gram_schmidt_and_svd_give_rotations() -> None:
     ("enc", "dec"),
     [
         (rot.matrix_to_rotation_6d, rot.rotation_6d_to_matrix),
+        (rot.matrix_to_rotation_6d_stem, rot.rotation_6d_stem_to_matrix),
         (rot.matrix_to_rotation_9d, rot.rotation_9d_to_matrix),
         (rot.matrix_to_quaternion, rot.quaternion_to_matrix),
         (rot.matrix_to_euler, rot.euler_to_matrix),
@@ -41,6 +43,18 @@ def test_gram_schmidt_and_svd_give_rotations() -> None:
 )
 def test_round_trip(R: torch.Tensor, enc, dec) -> None:
     assert torch.allclose(dec(enc(R)), R, atol=1e-6)
+
+
+def test_stem_first_6d_keeps_the_stem_axis_when_yaw_is_unknown() -> None:
+    # A network unsure of yaw outputs a shrunken, noisy second vector; the stem-first decoding
+    # keeps the stem axis exactly, the plain one (axis = b1 × b2) does not.
+    g = torch.Generator().manual_seed(2)
+    R = rot.random_rotations(200, g, dtype=torch.float64)
+    noise = 0.3 * torch.randn(200, 3, generator=g, dtype=torch.float64)
+    stem = rot.rotation_6d_stem_to_matrix(torch.cat((R[:, :, 2], R[:, :, 0] + noise), -1))
+    plain = rot.rotation_6d_to_matrix(torch.cat((R[:, :, 0] + noise, R[:, :, 1]), -1))
+    assert torch.allclose(stem[:, :, 2], R[:, :, 2], atol=1e-12)
+    assert torch.rad2deg(rot.axis_angle_error(plain, R)).mean() > 5.0
 
 
 def test_euler_convention_is_rz_ry_rx() -> None:
