@@ -2,8 +2,9 @@
 
 Targets (SMS3D Table 1 was measured on a GPU): <= 5.5 ms per 1024-point mushroom and
 <= 100 ms per batch of 100. Prints one Markdown table; run ``python benchmarks/bench_pose.py``.
-Times are medians over ``--repeats`` runs after a warm-up, in eval mode under ``inference_mode``
-(as ``PoseEstimator`` runs it).
+Times are medians over ``--repeats`` runs after a warm-up of ``PoseEstimator.infer`` (eval mode,
+``inference_mode``); ``--workers W`` splits batches over W threads, each with ``--threads``
+intra-op threads (``--threads 1 --workers 2`` suits a 2-core CPU).
 """
 
 from __future__ import annotations
@@ -19,17 +20,17 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # runs from a checkout
 
+from perception.estimator import PoseEstimator  # noqa: E402
 from perception.pose_net import PoseNet, PoseNetConfig  # noqa: E402
 
 
-def time_ms(model: PoseNet, x: torch.Tensor, repeats: int) -> float:
-    with torch.inference_mode():
-        model(x)
-        ts = []
-        for _ in range(repeats):
-            t = time.perf_counter()
-            model(x)
-            ts.append((time.perf_counter() - t) * 1e3)
+def time_ms(estimator: PoseEstimator, x: torch.Tensor, repeats: int) -> float:
+    estimator.infer(x)
+    ts = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        estimator.infer(x)
+        ts.append((time.perf_counter() - t) * 1e3)
     return statistics.median(ts)
 
 
@@ -41,7 +42,8 @@ def weights_mb(model: PoseNet) -> float:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--threads", type=int, default=2, help="intra-op threads (torch.set_num_threads)")
+    p.add_argument("--workers", type=int, default=1, help="threads a batch is split over (PoseEstimator workers)")
     p.add_argument("--repeats", type=int, default=20)
     p.add_argument("--points", type=int, nargs="+", default=[64, 256, 512, 1024])
     p.add_argument("--backbones", nargs="+", default=["point_transformer", "pointnet", "pointnet2"])
@@ -49,16 +51,17 @@ def main() -> None:
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
-    print(f"device={args.device} threads={torch.get_num_threads()} torch={torch.__version__}\n")
+    print(f"device={args.device} threads={torch.get_num_threads()} workers={args.workers} torch={torch.__version__}\n")
     print("| backbone | points | params | weights MB | ms / mushroom (B=1) | ms / batch of 100 | ms / mushroom in batch |")
     print("|---|---:|---:|---:|---:|---:|---:|")
     for bb in args.backbones:
         for n in args.points:
             model = PoseNet(PoseNetConfig(backbone=bb, num_points=n)).to(args.device).eval()
+            estimator = PoseEstimator(model, args.device, workers=args.workers)
             x1 = torch.rand(1, n, 3, device=args.device) * 2 - 1
             x100 = torch.rand(100, n, 3, device=args.device) * 2 - 1
-            t1 = time_ms(model, x1, args.repeats)
-            t100 = time_ms(model, x100, max(3, args.repeats // 5))
+            t1 = time_ms(estimator, x1, args.repeats)
+            t100 = time_ms(estimator, x100, max(3, args.repeats // 5))
             npar = sum(q.numel() for q in model.parameters())
             print(f"| {bb} | {n} | {npar:,} | {weights_mb(model):.2f} | {t1:.2f} | {t100:.1f} | {t100 / 100:.2f} |", flush=True)
 

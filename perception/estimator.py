@@ -15,11 +15,17 @@ the output); the stem axes and x axes are averaged and re-orthonormalised stem f
 hold far more points than the network reads (median ≈ 1,900 for a rendered mushroom, 512 read),
 and single passes scatter around the truth, so the average is markedly more accurate for K×
 the network time (``perception/weights/README.md`` has the measured errors).
+
+``workers=W`` splits a batch into ``W`` parts run in ``W`` threads (torch releases the GIL in
+its kernels). The Point Transformer's CPU kernels are small, so one intra-op thread per worker
+(``torch.set_num_threads(1)``) with ``W`` = the number of cores gives the best throughput:
+``benchmarks/bench_pose.py --workers`` measures it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,11 +67,14 @@ class PoseEstimator:
         seed: int = 0,
         min_points: int = MIN_POINTS,
         views: int = 1,
+        workers: int = 1,
     ) -> None:
-        if isinstance(views, bool) or not isinstance(views, int) or views < 1:
-            raise PerceptionConfigError("views", f"must be an int >= 1, got {views!r}")
+        for name, value in (("views", views), ("workers", workers)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise PerceptionConfigError(name, f"must be an int >= 1, got {value!r}")
         self.model = model.to(device).eval()
         self.views = views
+        self.workers = workers
         angles = 2 * np.pi * np.arange(views) / views
         c, s = np.cos(angles), np.sin(angles)
         zero, one = np.zeros(views), np.ones(views)
@@ -106,6 +115,21 @@ class PoseEstimator:
             return None
 
     @torch.inference_mode()
+    def infer(self, x: torch.Tensor) -> torch.Tensor:
+        """The network on prepared clouds ``x (B, N, C)`` → ``(B, 3, 3)``, split over
+        ``workers`` threads for large batches."""
+        if self.workers == 1 or len(x) < 2 * self.workers:
+            return self.model(x)
+        # inference_mode is thread-local: each worker enters it through this same method.
+        with ThreadPoolExecutor(self.workers) as pool:
+            return torch.cat(list(pool.map(self.infer_single, x.tensor_split(self.workers))))
+
+    @torch.inference_mode()
+    def infer_single(self, x: torch.Tensor) -> torch.Tensor:
+        """The network on ``x`` in the calling thread."""
+        return self.model(x)
+
+    @torch.inference_mode()
     def estimate_batch(
         self, clouds: Sequence[np.ndarray], colors: Sequence[np.ndarray | None] | None = None
     ) -> list[Estimate]:
@@ -130,7 +154,7 @@ class PoseEstimator:
         turns = np.tile(self._turns, (len(clouds), 1, 1))
         x = torch.stack([to_tensor(c.points @ t.T, c.colors) for c, t in zip(prepared, turns, strict=True)])
         # A cloud turned by T has rotation T R: undo each turn, then average the K passes.
-        R = np.einsum("nji,njk->nik", turns, self.model(x.to(self.device)).double().cpu().numpy())
+        R = np.einsum("nji,njk->nik", turns, self.infer(x.to(self.device)).double().cpu().numpy())
         if self.views > 1:
             mean = R.reshape(len(clouds), self.views, 3, 3).mean(1)
             R = rotation_6d_stem_to_matrix(torch.from_numpy(np.concatenate((mean[:, :, 2], mean[:, :, 0]), 1))).numpy()

@@ -78,3 +78,13 @@ def test_test_time_views_are_turns_about_the_optical_axis() -> None:
     assert np.degrees(np.arccos(np.clip(one.stem_axis @ plain[0].stem_axis, -1, 1))) < 10.0
     with pytest.raises(PerceptionConfigError, match="views"):
         PoseEstimator.from_pretrained(views=0)
+
+
+def test_workers_split_a_batch_without_changing_it(estimator: PoseEstimator) -> None:
+    import torch
+
+    x = torch.rand(9, estimator.config.num_points, 3) * 2 - 1
+    split = PoseEstimator(estimator.model, workers=2)
+    torch.testing.assert_close(split.infer(x), estimator.infer(x), atol=1e-6, rtol=0)
+    with pytest.raises(PerceptionConfigError, match="workers"):
+        PoseEstimator(estimator.model, workers=True)
