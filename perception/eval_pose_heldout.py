@@ -6,7 +6,8 @@ the held-out models (id 6, seed 3002), 500 each; and, with ``--scenes DIR``, eve
 a rendered scene dataset split (``sms3d generate``), plus the tallest mushroom of each scene
 (highest cap top among the instances with enough visible points: the picking environment's
 default target). Metrics: geodesic and stem-axis errors (degrees), and the axis error of the
-"always upright" prior (stem along -z of the OpenCV camera, i.e. towards a downward camera).
+"always upright" prior (stem along -z of the OpenCV camera, i.e. towards a downward camera),
+and the mean/median axis error by visible points and by the stem's angle to the camera axis.
 
     python -m perception.eval_pose_heldout --scenes runs/pose_scenes_heldout --split test \\
         [--checkpoint PATH] [--json OUT.json]
@@ -26,6 +27,20 @@ import torch
 from perception.data import PointCloudSample, samples_from_scenes
 from perception.estimator import PoseEstimator, default_weights_path
 from perception.synthetic_views import default_models, generate_samples
+
+#: Bins of the breakdowns: visible points of the instance, stem angle to the camera's -z (°).
+POINT_BINS = (0, 200, 500, 1000, 2000, 4000, np.inf)
+TILT_BINS = (0, 10, 20, 30, 45, 180)
+
+
+def _by_bin(err: np.ndarray, value: np.ndarray, edges: Sequence[float]) -> dict[str, dict[str, float]]:
+    out = {}
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        m = (value >= lo) & (value < hi)
+        if m.any():
+            out[f"[{lo:g}, {hi:g})"] = {"n": int(m.sum()), "mean_axis_deg": float(err[m].mean()),
+                                         "median_axis_deg": float(np.median(err[m]))}  # fmt: skip
+    return out
 
 
 def _metrics(est: PoseEstimator, samples: Sequence[PointCloudSample], batch: int = 64) -> dict[str, float]:
@@ -49,6 +64,8 @@ def _metrics(est: PoseEstimator, samples: Sequence[PointCloudSample], batch: int
         "p90_axis_deg": float(np.percentile(ax, 90)),
         "upright_prior_mean_axis_deg": float(up.mean()),
         "seconds": time.perf_counter() - t,
+        "by_visible_points": _by_bin(ax, np.array([len(s.points) for s in samples]), POINT_BINS),
+        "by_tilt_to_camera_deg": _by_bin(ax, up, TILT_BINS),
     }
 
 
