@@ -9,9 +9,10 @@ default, fast) each call draws from the estimator's seeded generator, so repeate
 same cloud can differ slightly; ``sampling="fps"`` is deterministic and order independent but
 costs a farthest-point-sampling pass per cloud.
 
-``views=K`` averages K passes per cloud: each draws its own ``num_points`` sample and turns
-the cloud by ``2πk/K`` about the camera's optical axis (a symmetry of a pinhole view, undone on
-the output); the stem axes and x axes are averaged and re-orthonormalised stem first. Clouds
+``views=K`` (default 8; 1 for a single pass) averages K passes per cloud: each draws its own
+``num_points`` sample and turns the cloud by ``2πk/K`` about the camera's optical axis (a
+symmetry of a pinhole view, undone on the output); the stem axes and x axes are averaged and
+re-orthonormalised stem first. Clouds
 hold far more points than the network reads (median ≈ 1,900 for a rendered mushroom, 512 read),
 and single passes scatter around the truth, so the average is markedly more accurate for K×
 the network time (``perception/weights/README.md`` has the measured errors).
@@ -66,7 +67,7 @@ class PoseEstimator:
         sampling: SamplingMethod = "random",
         seed: int = 0,
         min_points: int = MIN_POINTS,
-        views: int = 1,
+        views: int = 8,
         workers: int = 1,
     ) -> None:
         for name, value in (("views", views), ("workers", workers)):
