@@ -64,7 +64,7 @@ def _metrics(est: PoseEstimator, samples: Sequence[PointCloudSample], batch: int
         "p90_axis_deg": float(np.percentile(ax, 90)),
         "upright_prior_mean_axis_deg": float(up.mean()),
         "seconds": time.perf_counter() - t,
-        "by_visible_points": _by_bin(ax, np.array([len(s.points) for s in samples]), POINT_BINS),
+        "by_visible_points": _by_bin(ax, np.array([s.meta.get("num_valid", len(s.points)) for s in samples]), POINT_BINS),
         "by_tilt_to_camera_deg": _by_bin(ax, up, TILT_BINS),
     }
 
