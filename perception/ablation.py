@@ -4,7 +4,8 @@ Each variant is trained with the same data, seeds and optimiser settings, then e
 held-out set; results go to ``OUT/ablation.md`` (a Markdown table of mean/median geodesic and
 stem-axis errors and batch-1 inference ms) and ``OUT/ablation.json``. For the first variant
 (the default network) it also plots error against roll, pitch, yaw and cap size
-(``OUT/error_vs_angles.png``, ``OUT/error_vs_size.png``).
+(``OUT/error_vs_angles.png``, ``OUT/error_vs_size.png``). Rerunning with the same ``--out``
+and settings resumes: variants already in ``OUT/ablation.json`` are not trained again.
 
 Run: ``python -m perception.ablation --out runs/ablation`` (see ``--help`` for sizes).
 """
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from generator.files import write_atomic
 from perception.data import PointCloudPoseDataset, PointCloudSample
 from perception.pose_net import PoseNet, PoseNetConfig
 from perception.synthetic_views import ViewConfig, default_models, generate_samples
@@ -78,8 +80,20 @@ def run_ablation(
     """Train and evaluate every variant; write the table, JSON and plots; return the rows."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    settings = {"train": train_config.to_dict(), "samples": [len(train_samples), len(val_samples), len(test_samples)]}
+    settings_path, rows_path = out / "ablation_settings.json", out / "ablation.json"
+    done: dict[str, dict] = {}
+    if rows_path.exists():
+        stored = json.loads(settings_path.read_text()) if settings_path.exists() else None
+        if stored != json.loads(json.dumps(settings, default=str)):
+            raise ValueError(f"{out}: holds an ablation run with other settings ({stored}); use another output folder")
+        done = {r["variant"]: r for r in json.loads(rows_path.read_text())}
+    write_atomic(settings_path, json.dumps(settings, indent=2, default=str))
     rows = []
     for i, v in enumerate(variants):
+        if v.name in done:
+            rows.append(done[v.name])
+            continue
         n = v.net
         t = time.perf_counter()
         tr = PointCloudPoseDataset(train_samples, n.num_points, n.use_rgb, train_config.augment, seed=train_config.seed)
@@ -94,8 +108,8 @@ def run_ablation(
         if i == 0:
             meta = [te.samples[j].meta for j in idx]
             plot_errors(g, a, meta, out, title=v.name)
-        (out / "ablation.json").write_text(json.dumps(rows, indent=2))
-        (out / "ablation.md").write_text(markdown_table(rows))
+        write_atomic(rows_path, json.dumps(rows, indent=2))
+        write_atomic(out / "ablation.md", markdown_table(rows))
     return rows
 
 

@@ -173,3 +173,21 @@ def test_best_checkpoint_selected_by_axis_error(tmp_path, models) -> None:
     assert kept["extra"]["epoch"] == best_row["epoch"]
     with pytest.raises(PerceptionConfigError, match="select_by"):
         TrainConfig(select_by="geodesic")
+
+
+def test_ablation_writes_its_table_and_resumes(models, tmp_path, monkeypatch) -> None:
+    from perception import ablation
+
+    samples = generate_samples(24, seed=8, models=models, config=FAST_VIEWS)
+    variants = [ablation.Variant("backbone", PoseNetConfig(backbone="pointnet", num_points=64)),
+                ablation.Variant("head", PoseNetConfig(backbone="pointnet", head="6d_stem", num_points=64))]
+    cfg = TrainConfig(epochs=1, batch_size=8, lr=1e-3, progress=False)
+    rows = ablation.run_ablation(variants, samples[:16], samples[16:20], samples[20:], cfg, tmp_path)
+    table = (tmp_path / "ablation.md").read_text()
+    assert len(rows) == 2 and "6d_stem" in table and table.count("\n") == 4
+    assert (tmp_path / "error_vs_angles.png").stat().st_size > 0 and (tmp_path / "error_vs_size.png").exists()
+    # A rerun trains nothing and returns the stored rows; other settings are refused.
+    monkeypatch.setattr(ablation, "train", lambda *a, **k: pytest.fail("resumed variant was trained again"))
+    assert ablation.run_ablation(variants, samples[:16], samples[16:20], samples[20:], cfg, tmp_path) == rows
+    with pytest.raises(ValueError, match="other settings"):
+        ablation.run_ablation(variants, samples[:12], samples[16:20], samples[20:], cfg, tmp_path)
