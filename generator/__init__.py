@@ -1,21 +1,32 @@
 """Synthetic mushroom beds (SMS3D section 3.1) as MuJoCo models and RGB-D datasets."""
 
+import importlib
 import os
 
 # Off-screen rendering without a display by default. MuJoCo picks its GL backend when it is first
-# imported, which the imports below do, so this must come first.
+# imported (generator.geometry does), so this must come before any submodule is loaded.
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from generator.config import CameraConfig, PlacementConfig, SceneConfig, TerrainConfig  # noqa: E402
-from generator.errors import ConfigError, MeshError, SceneFormatError  # noqa: E402
-from generator.generate import generate_scene, generate_scene_with_stats  # noqa: E402
-from generator.mesh_loader import load_mushroom_mesh  # noqa: E402
-from generator.mushroom_models import MushroomModel, model_library  # noqa: E402
-from generator.scene import MushroomInstance, Scene  # noqa: E402
-from generator.terrain import Terrain  # noqa: E402
+#: Public names and the submodules that define them; loaded on first access (PEP 562) so that
+#: ``sms3d --help`` and light imports do not pay for trimesh, scipy and MuJoCo.
+_EXPORTS = {
+    "CameraConfig": "config", "PlacementConfig": "config", "SceneConfig": "config", "TerrainConfig": "config",
+    "ConfigError": "errors", "MeshError": "errors", "SceneFormatError": "errors",
+    "generate_scene": "generate", "generate_scene_with_stats": "generate",
+    "load_mushroom_mesh": "mesh_loader", "MushroomModel": "mushroom_models", "model_library": "mushroom_models",
+    "MushroomInstance": "scene", "Scene": "scene", "Terrain": "terrain",
+}  # fmt: skip
 
-__all__ = [
-    "CameraConfig", "ConfigError", "MeshError", "MushroomInstance", "MushroomModel",
-    "PlacementConfig", "Scene", "SceneConfig", "SceneFormatError", "Terrain", "TerrainConfig",
-    "generate_scene", "generate_scene_with_stats", "load_mushroom_mesh", "model_library",
-]
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'generator' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"generator.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + __all__)
