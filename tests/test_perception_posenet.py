@@ -7,7 +7,14 @@ import torch
 
 from perception.backbones import BACKBONES
 from perception.errors import CheckpointMismatchError, PerceptionConfigError
-from perception.pose_net import HEAD_DIMS, PoseNet, PoseNetConfig, load_backbone, load_checkpoint, save_checkpoint
+from perception.pose_net import (
+    HEAD_DIMS,
+    PoseNet,
+    PoseNetConfig,
+    load_backbone,
+    load_checkpoint,
+    save_checkpoint,
+)
 
 
 @pytest.mark.parametrize("name", sorted(BACKBONES))
