@@ -10,10 +10,11 @@ from perception.estimator import PoseEstimator, default_weights_path
 from perception.pointcloud import depth_to_points
 from perception.synthetic_views import ViewConfig, default_models, generate_samples
 
-#: Stated tolerance: mean stem-axis error of the shipped network on 40 held-out views
-#: (all 14 models, 20° tilt σ). perception/weights/README.md reports 7.6° (training models)
-#: and 11.0° (held-out models) on 500 views each; always guessing "upright" gives ~25°.
-AXIS_TOLERANCE_DEG = 15.0
+#: Stated tolerance: mean stem-axis error of the shipped network (8 test-time views, the
+#: default) on 40 views of all 14 library models, 20° tilt σ: measured 4.2° (6.3° with one
+#: view). perception/weights/README.md reports 3.1° / 4.6° (training / held-out models) on 500
+#: views each; always guessing "upright" gives ~25°.
+AXIS_TOLERANCE_DEG = 7.0
 
 
 @pytest.fixture(scope="module")
