@@ -160,12 +160,29 @@ def _run_and_save(task: Task, config: SweepConfig, parts: Path) -> str:
 RESUME_KEYS = ("seed", "num_mushrooms", "chunk", "env_kwargs", "perception_detector")
 
 
-def _check_resumable(path: Path, config: SweepConfig) -> None:
+def _pose_weights_digest() -> str:
+    """SHA-256 (16 hex digits) of the shipped pose weights the perception episodes use."""
+    import hashlib
+
+    from perception.estimator import default_weights_path
+
+    return hashlib.sha256(default_weights_path().read_bytes()).hexdigest()[:16]
+
+
+def _settings(config: SweepConfig) -> dict[str, Any]:
+    """What ``sweep_config.json`` records: the config, and the pose weights behind perception parts."""
+    digest = _pose_weights_digest() if config.perception_episodes else None
+    return json.loads(json.dumps({**dataclasses.asdict(config), "pose_weights_sha256": digest}, default=str))
+
+
+def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
     if not path.is_file():
         return
     stored = json.loads(path.read_text(encoding="utf-8"))
-    requested = json.loads(json.dumps(dataclasses.asdict(config), default=str))
-    differ = {k: (stored.get(k), requested[k]) for k in RESUME_KEYS if stored.get(k) != requested[k]}
+    keys = list(RESUME_KEYS)
+    if any(path.parent.glob("parts/*_perception_*.json")) and requested["pose_weights_sha256"] is not None:
+        keys.append("pose_weights_sha256")  # perception parts made with other weights are stale
+    differ = {k: (stored.get(k), requested[k]) for k in keys if stored.get(k) != requested[k]}
     if differ:
         details = ", ".join(f"{k}: folder has {a!r}, requested {b!r}" for k, (a, b) in differ.items())
         raise ValueError(f"{path.parent} holds a sweep with other settings ({details}); use another --out")
@@ -178,8 +195,9 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
     out = Path(out)
     parts = out / "parts"
     parts.mkdir(parents=True, exist_ok=True)
-    _check_resumable(out / "sweep_config.json", config)
-    write_atomic(out / "sweep_config.json", json.dumps(dataclasses.asdict(config), sort_keys=True, default=str))
+    settings = _settings(config)
+    _check_resumable(out / "sweep_config.json", settings)
+    write_atomic(out / "sweep_config.json", json.dumps(settings, sort_keys=True))
     tasks = plan_tasks(config)
     todo = [t for t in tasks if not (parts / f"{t.name}.json").exists()]
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="sweep tasks", disable=not progress)

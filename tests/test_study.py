@@ -72,6 +72,12 @@ def test_small_sweep_resumes_and_reports(tmp_path):
         run_sweep(dataclasses.replace(config, num_mushrooms=9), tmp_path, progress=False)
     with pytest.raises(ValueError, match="perception_detector"):
         run_sweep(dataclasses.replace(config, perception_detector="det.pt"), tmp_path, progress=False)
+    # Perception parts made with other pose weights are stale.
+    record = json.loads((tmp_path / "sweep_config.json").read_text())
+    assert len(record["pose_weights_sha256"]) == 16
+    (tmp_path / "sweep_config.json").write_text(json.dumps({**record, "pose_weights_sha256": "0" * 16}))
+    with pytest.raises(ValueError, match="pose_weights_sha256"):
+        run_sweep(config, tmp_path, progress=False)
     paths = write_report(rows + perception, tmp_path, "sms3d sweep ...")
     with open(paths["csv"]) as fh:
         assert len(list(csv.DictReader(fh))) == 5
