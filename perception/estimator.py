@@ -12,10 +12,10 @@ costs a farthest-point-sampling pass per cloud.
 ``views=K`` (default 8; 1 for a single pass) averages K passes per cloud: each draws its own
 ``num_points`` sample and turns the cloud by ``2πk/K`` about the camera's optical axis (a
 symmetry of a pinhole view, undone on the output); the stem axes and x axes are averaged and
-re-orthonormalised stem first. Clouds
-hold far more points than the network reads (median ≈ 1,900 for a rendered mushroom, 512 read),
-and single passes scatter around the truth, so the average is markedly more accurate for K×
-the network time (``perception/weights/README.md`` has the measured errors).
+re-orthonormalised stem first. Clouds hold far more points than the network reads (≈ 700–4,000
+for a rendered mushroom, 512 read), and single passes scatter around the truth, so the average
+is markedly more accurate for K× the network time (``perception/weights/README.md`` has the
+measured errors).
 
 ``workers=W`` splits a batch into ``W`` parts run in ``W`` threads (torch releases the GIL in
 its kernels). The Point Transformer's CPU kernels are small, so one intra-op thread per worker
