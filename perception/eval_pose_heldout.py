@@ -91,11 +91,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--num", type=int, default=500, help="synthetic views per set")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--views", type=int, default=1, help="test-time views averaged per cloud (PoseEstimator views)")
+    p.add_argument("--upright-pass", action="store_true", help="PoseEstimator upright_pass: views again on the uprighted cloud")
     p.add_argument("--json", help="also write the results here")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
-    est = PoseEstimator.from_checkpoint(path, sampling="random", seed=0, views=args.views)
+    est = PoseEstimator.from_checkpoint(path, sampling="random", seed=0, views=args.views, upright_pass=args.upright_pass)
     out: dict[str, dict[str, float]] = {}
     if not args.no_synthetic:
         for label, seed, ids in (("synthetic views, training models (ids 0-5), seed 3001", 3001, (0, 1, 2, 3, 4, 5)),
@@ -111,7 +112,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             out[label] = _metrics(est, ss)
             print(label, json.dumps(out[label]), flush=True)
     if args.json:
-        Path(args.json).write_text(json.dumps({"checkpoint": str(path), "views": args.views, "results": out}, indent=2))
+        Path(args.json).write_text(json.dumps({"checkpoint": str(path), "views": args.views, "upright_pass": args.upright_pass, "results": out}, indent=2))
     return 0
 
 

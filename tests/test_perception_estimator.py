@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from perception.errors import NoEstimate, PerceptionConfigError
-from perception.estimator import PoseEstimator, default_weights_path
+from perception.estimator import PoseEstimator, default_weights_path, turn_to_camera
 from perception.pointcloud import depth_to_points
 from perception.synthetic_views import ViewConfig, default_models, generate_samples
 
@@ -64,10 +64,12 @@ def test_too_few_points_gives_no_estimate(estimator: PoseEstimator) -> None:
     assert estimator.estimate_or_none(np.zeros((0, 3))) is None
 
 
-def test_test_time_views_are_turns_about_the_optical_axis() -> None:
+@pytest.mark.parametrize("upright_pass", [False, True])
+def test_test_time_views_are_turns_about_the_optical_axis(upright_pass: bool) -> None:
     # With FPS sampling every pass reads the same points, so turning the cloud a quarter turn
     # about the optical axis only permutes the 4 passes: the averaged estimate turns with it.
-    est = PoseEstimator.from_pretrained(sampling="fps", views=4)
+    # The upright pass's turn commutes with the quarter turn, so that holds for it too.
+    est = PoseEstimator.from_pretrained(sampling="fps", views=4, upright_pass=upright_pass)
     s = generate_samples(3, seed=11, models=default_models(model_ids=(2,)))
     quarter = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     plain = est.estimate_batch([x.points for x in s])
@@ -79,6 +81,27 @@ def test_test_time_views_are_turns_about_the_optical_axis() -> None:
     assert np.degrees(np.arccos(np.clip(one.stem_axis @ plain[0].stem_axis, -1, 1))) < 10.0
     with pytest.raises(PerceptionConfigError, match="views"):
         PoseEstimator.from_pretrained(views=0)
+
+
+def test_upright_pass_estimates_the_stem_axis(estimator: PoseEstimator) -> None:
+    samples = generate_samples(40, seed=424242, models=default_models(), config=ViewConfig(surface_samples=20000))
+    upright = PoseEstimator(estimator.model, upright_pass=True, seed=0).estimate_batch([s.points for s in samples])
+    errs = [_axis_err_deg(e.stem_axis, s.rotation[:, 2]) for e, s in zip(upright, samples, strict=True)]
+    assert np.mean(errs) < AXIS_TOLERANCE_DEG
+
+
+def test_turn_to_camera_takes_the_axis_to_minus_z() -> None:
+    axes = np.random.default_rng(0).normal(size=(20, 3))
+    axes[0], axes[1] = (0.0, 0.0, 1.0), (0.0, 0.0, -1.0)  # straight away from / at the camera
+    Q = turn_to_camera(axes)
+    unit = axes / np.linalg.norm(axes, axis=1, keepdims=True)
+    np.testing.assert_allclose(np.einsum("nij,nj->ni", Q, unit), np.tile([0.0, 0.0, -1.0], (20, 1)), atol=1e-12)
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", Q, Q), np.tile(np.eye(3), (20, 1, 1)), atol=1e-12)
+    assert np.allclose(np.linalg.det(Q), 1.0)
+    np.testing.assert_allclose(Q[1], np.eye(3))
+    # The shortest turn leaves the direction perpendicular to both axes where it is.
+    perp = np.cross(unit[5], [0.0, 0.0, -1.0])
+    np.testing.assert_allclose(Q[5] @ perp, perp, atol=1e-12)
 
 
 def test_workers_split_a_batch_without_changing_it(estimator: PoseEstimator) -> None:
