@@ -12,24 +12,28 @@ import json
 import sys
 from pathlib import Path
 
-import torch
+from perception.choices import ARCHITECTURES, CATEGORIES
 
-from perception.maskrcnn import ARCHITECTURES, CATEGORIES, DetectorConfig
+# torch, torchvision and the dataset readers are imported inside the commands: ``register`` runs
+# for every ``sms3d`` invocation, ``--help`` included, and loading them takes seconds.
 
 SPLITS = ("train", "val", "test")
 
 
 def _clear_errors(func):
     """Typed input errors become one line on stderr and exit code 2, not a traceback."""
-    from generator.dataset.errors import CorruptFileError
-    from perception.errors import (
-        CheckpointFormatError,
-        CheckpointMismatchError,
-        PerceptionConfigError,
-    )
-    from perception.pipeline import PipelineInputError
 
     def run(args: argparse.Namespace) -> int:
+        # Imported when the command runs, not when ``register`` wraps it (perception.pipeline
+        # loads torch).
+        from generator.dataset.errors import CorruptFileError
+        from perception.errors import (
+            CheckpointFormatError,
+            CheckpointMismatchError,
+            PerceptionConfigError,
+        )
+        from perception.pipeline import PipelineInputError
+
         try:
             return func(args)
         except (PerceptionConfigError, CheckpointFormatError, CheckpointMismatchError, CorruptFileError,
@@ -38,6 +42,14 @@ def _clear_errors(func):
             return 2
 
     return run
+
+
+def _set_threads(threads: int | None) -> None:
+    """``--threads``; None (the default) keeps torch's own thread count, which the parser cannot
+    ask for without importing torch."""
+    import torch
+
+    torch.set_num_threads(max(1, torch.get_num_threads()) if threads is None else threads)
 
 
 def _pipeline(args: argparse.Namespace):
@@ -53,9 +65,10 @@ def _pipeline(args: argparse.Namespace):
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    from perception.maskrcnn import DetectorConfig
     from perception.train_detector import DetectorTrainConfig, train_detector
 
-    torch.set_num_threads(args.threads)
+    _set_threads(args.threads)
     config = DetectorConfig(arch=args.arch, category=args.category, min_size=args.min_size, max_size=args.max_size)
     train = DetectorTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                                 max_images=args.max_images, pretrained=args.pretrained, augment=not args.no_augment)
@@ -68,7 +81,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from perception.detector_eval import evaluate_detector
     from perception.maskrcnn import MaskRCNNDetector
 
-    torch.set_num_threads(args.threads)
+    _set_threads(args.threads)
     detector = MaskRCNNDetector.from_checkpoint(args.checkpoint, args.device, score_threshold=args.score_threshold)
     report = evaluate_detector(detector, args.data, args.split, detector.config.category, args.min_area,
                                args.score_threshold, args.max_images, progress=True)
@@ -81,7 +94,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 def cmd_eval_pipeline(args: argparse.Namespace) -> int:
     from perception.eval_pipeline import evaluate_pipeline
 
-    torch.set_num_threads(args.threads)
+    _set_threads(args.threads)
     pipeline, oracle = _pipeline(args)
     report = evaluate_pipeline(pipeline, args.data, args.split, oracle, args.min_area, args.max_scenes, progress=True)
     print(report.markdown())
@@ -96,7 +109,7 @@ def cmd_show(args: argparse.Namespace) -> int:
     from perception.eval_pipeline import run_scene
     from perception.show_estimates import estimates_figure
 
-    torch.set_num_threads(args.threads)
+    _set_threads(args.threads)
     pipeline, oracle = _pipeline(args)
     sample = read_scene_files(Path(args.data) / scene_dirname(args.scene))
     estimates = run_scene(pipeline, sample, oracle)
@@ -107,7 +120,7 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="dataset folder written by `sms3d generate`")
-    p.add_argument("--threads", type=int, default=max(1, torch.get_num_threads()), help="torch CPU threads")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
 
 
 def _pipeline_args(p: argparse.ArgumentParser) -> None:

@@ -21,13 +21,11 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-import torch
-
-from perception.data import PointCloudPoseDataset, load_samples, samples_from_scenes, save_samples
+from perception.choices import HEAD_DIMS
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
-from perception.pose_net import HEAD_DIMS, PoseNetConfig, load_checkpoint
-from perception.synthetic_views import default_models, generate_samples, procedural_mesh_models
-from perception.train import TrainConfig, evaluate, train
+
+# torch, the data pipeline and the networks are imported inside the commands: ``register`` runs
+# for every ``sms3d`` invocation, ``--help`` included, and loading them takes seconds.
 
 DEFAULT_TRAIN_MODEL_IDS = (0, 1, 2, 3, 4, 5)  # model 6 of each species is held out
 
@@ -43,6 +41,9 @@ def _samples(
     data: str | None, n: int, seed: int, model_ids: Sequence[int] | None, cache: Path | None, label: str,
     procedural: int = 0,
 ):  # fmt: skip
+    from perception.data import load_samples, save_samples
+    from perception.synthetic_views import default_models, generate_samples, procedural_mesh_models
+
     if data:
         return load_samples(data)
     shapes = f"procedural{procedural}" if procedural else f"models{'-'.join(map(str, model_ids or []))}"
@@ -61,6 +62,12 @@ def _samples(
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    import torch
+
+    from perception.data import PointCloudPoseDataset, samples_from_scenes
+    from perception.pose_net import PoseNetConfig
+    from perception.train import TrainConfig, train
+
     torch.set_num_threads(args.threads)
     try:
         net = PoseNetConfig(backbone=args.backbone, head=args.head, use_rgb=args.rgb, num_points=args.num_points)
@@ -105,8 +112,14 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    torch.set_num_threads(args.threads)
+    import torch
+
+    from perception.data import PointCloudPoseDataset, samples_from_scenes
     from perception.estimator import default_weights_path
+    from perception.pose_net import load_checkpoint
+    from perception.train import evaluate
+
+    torch.set_num_threads(args.threads)
 
     path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
     model, extra = load_checkpoint(path, map_location=args.device)

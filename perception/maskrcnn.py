@@ -22,11 +22,10 @@ import numpy as np
 import torch
 from torch import nn
 
+from perception.choices import ARCHITECTURES, CATEGORIES
 from perception.detector import Detection
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 
-ARCHITECTURES = ("mobilenet_v3_fpn", "resnet50_fpn_v2")
-CATEGORIES = {"mushroom": 1, "mushroom_cap": 2}  # the dataset's COCO category ids
 CHECKPOINT_FORMAT = "sms3d-maskrcnn-1"
 
 

@@ -22,10 +22,10 @@ from torch import nn
 
 from perception import rotations as rot
 from perception.backbones import BACKBONES, build_backbone
+from perception.choices import HEAD_DIMS
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 
 Head = Literal["6d", "6d_stem", "9d", "quat", "euler"]
-HEAD_DIMS: dict[str, int] = {"6d": 6, "6d_stem": 6, "9d": 9, "quat": 4, "euler": 3}
 _DECODERS = {
     "6d": rot.rotation_6d_to_matrix,
     "6d_stem": rot.rotation_6d_stem_to_matrix,

@@ -1,5 +1,6 @@
 """Gymnasium environments for robotic mushroom picking (``SMS3DPick-v0``, ``SMS3DPickSparse-v0``)."""
 
+import importlib
 import os
 
 # Headless rendering by default; set before anything imports mujoco (and picks a GL backend).
@@ -7,12 +8,21 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from gymnasium.envs.registration import register, registry  # noqa: E402
 
-from sms3d_env.controller import ControllerConfig, IKController
-from sms3d_env.physics import PickPhysicsParams
-from sms3d_env.pick_env import FAILURE_CAUSES, SMS3DPickEnv
-from sms3d_env.pose_source import NoisyPose, OraclePose, PoseEstimate, PoseSource, make_pose_source
-from sms3d_env.robot import TOOLS, RobotConfig
-from sms3d_env.scripted_picker import HandPicker, ScriptedPicker, run_episode
+#: Public names and the submodules that define them; loaded on first access (PEP 562) so that
+#: ``sms3d --help`` and the light submodules (the sweep's and training's parsers) do not pay for
+#: MuJoCo and mink. The environment ids are registered here all the same: ``gym.make`` imports
+#: ``sms3d_env.pick_env`` through the entry point.
+_EXPORTS = {
+    "ControllerConfig": "controller", "IKController": "controller",
+    "PickPhysicsParams": "physics_params",
+    "FAILURE_CAUSES": "pick_env", "SMS3DPickEnv": "pick_env",
+    "NoisyPose": "pose_source", "OraclePose": "pose_source", "PoseEstimate": "pose_source",
+    "PoseSource": "pose_source", "make_pose_source": "pose_source",
+    "TOOLS": "robot", "RobotConfig": "robot",
+    "HandPicker": "scripted_picker", "ScriptedPicker": "scripted_picker", "run_episode": "scripted_picker",
+}  # fmt: skip
+
+__all__ = sorted(_EXPORTS)
 
 for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
                  ("SMS3DPickSparse-v0", {"reward_type": "sparse"})):
@@ -20,8 +30,14 @@ for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
         register(id=_id, entry_point="sms3d_env.pick_env:SMS3DPickEnv", max_episode_steps=250,
                  kwargs=_kw)
 
-__all__ = [
-    "FAILURE_CAUSES", "ControllerConfig", "HandPicker", "IKController", "NoisyPose", "OraclePose",
-    "PickPhysicsParams", "PoseEstimate", "PoseSource", "RobotConfig", "SMS3DPickEnv",
-    "ScriptedPicker", "TOOLS", "make_pose_source", "run_episode",
-]
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'sms3d_env' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"sms3d_env.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + __all__)

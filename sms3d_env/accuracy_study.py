@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from generator.files import write_atomic
-from sms3d_env.physics import PickPhysicsParams
+from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.study_report import write_report
 
 DEFAULT_ERRORS_DEG = (0.0, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0)

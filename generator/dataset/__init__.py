@@ -4,23 +4,32 @@ Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` here (set before MuJoCo
 For software rendering without EGL use ``MUJOCO_GL=osmesa PYOPENGL_PLATFORM=osmesa``.
 """
 
+import importlib
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # must precede the first import of mujoco
 
-# ruff: noqa: E402
+#: Public names and the submodules that define them; loaded on first access (PEP 562) so that
+#: ``sms3d --help`` and light imports (``generator.dataset.errors``, the ``generate`` parser) do
+#: not pay for the renderer's MuJoCo, trimesh and scipy.
+_EXPORTS = {
+    "backproject": "backproject", "backproject_pixels": "backproject",
+    "CorruptFileError": "errors", "DatasetError": "errors", "DatasetWriteError": "errors",
+    "ManifestMismatchError": "errors",
+    "DatasetOptions": "options", "RealismOptions": "options",
+    "generate_dataset": "runner",
+}  # fmt: skip
 
-from generator.dataset.backproject import backproject, backproject_pixels
-from generator.dataset.errors import (
-    CorruptFileError,
-    DatasetError,
-    DatasetWriteError,
-    ManifestMismatchError,
-)
-from generator.dataset.options import DatasetOptions, RealismOptions
-from generator.dataset.runner import generate_dataset
+__all__ = sorted(_EXPORTS)
 
-__all__ = [
-    "CorruptFileError", "DatasetError", "DatasetOptions", "DatasetWriteError", "ManifestMismatchError",
-    "RealismOptions", "backproject", "backproject_pixels", "generate_dataset",
-]
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'generator.dataset' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"generator.dataset.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + __all__)
