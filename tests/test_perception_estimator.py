@@ -11,9 +11,9 @@ from perception.pointcloud import depth_to_points
 from perception.synthetic_views import ViewConfig, default_models, generate_samples
 
 #: Stated tolerance: mean stem-axis error of the shipped network (8 test-time views, the
-#: default) on 40 views of all 14 library models, 20° tilt σ: measured 4.2° (6.3° with one
-#: view). perception/weights/README.md reports 3.1° / 4.6° (training / held-out models) on 500
-#: views each; always guessing "upright" gives ~25°.
+#: default) on 40 views of all 14 library models, 20° tilt σ: measured 3.8° (5.9° with one
+#: view, 3.8° with the upright pass). perception/weights/README.md reports 2.2° / 3.0° (training
+#: / held-out models) on 500 views each; always guessing "upright" gives ~25°.
 AXIS_TOLERANCE_DEG = 7.0
 
 
