@@ -1,7 +1,8 @@
 """Synthetic mushroom beds (SMS3D section 3.1) as MuJoCo models and RGB-D datasets."""
 
-import importlib
 import os
+
+from generator.lazy import lazy_exports
 
 # Off-screen rendering without a display by default. MuJoCo picks its GL backend when it is first
 # imported (generator.geometry does), so this must come before any submodule is loaded.
@@ -20,13 +21,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str):
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'generator' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"generator.{_EXPORTS[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(list(globals()) + __all__)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -1,7 +1,8 @@
 """Gymnasium environments for robotic mushroom picking (``SMS3DPick-v0``, ``SMS3DPickSparse-v0``)."""
 
-import importlib
 import os
+
+from generator.lazy import lazy_exports
 
 # Headless rendering by default; set before anything imports mujoco (and picks a GL backend).
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -31,13 +32,4 @@ for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
                  kwargs=_kw)
 
 
-def __getattr__(name: str):
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'sms3d_env' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"sms3d_env.{_EXPORTS[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(list(globals()) + __all__)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

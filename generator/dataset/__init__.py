@@ -4,8 +4,9 @@ Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` here (set before MuJoCo
 For software rendering without EGL use ``MUJOCO_GL=osmesa PYOPENGL_PLATFORM=osmesa``.
 """
 
-import importlib
 import os
+
+from generator.lazy import lazy_exports
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # must precede the first import of mujoco
 
@@ -23,13 +24,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str):
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'generator.dataset' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"generator.dataset.{_EXPORTS[name]}"), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(list(globals()) + __all__)
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
