@@ -101,6 +101,20 @@ def test_knn_sets_match_sorted_distances(M: int, N: int) -> None:
     brute = ((query.unsqueeze(2) - ref.unsqueeze(1)) ** 2).sum(-1).argsort(dim=-1)[..., :16]
     assert torch.equal(idx.sort(-1).values, brute.sort(-1).values)
     assert torch.all(d2[..., 1:] >= d2[..., :-1])
+    assert torch.equal(d2, torch.cdist(query, ref).square().gather(-1, idx))
+    unordered, _ = knn(query, ref, 16, sorted=False)
+    assert torch.equal(unordered.sort(-1).values, brute.sort(-1).values)
+
+
+def test_knn_with_k_at_least_n_returns_every_point() -> None:
+    ref = torch.rand(2, 10, 3)
+    idx, d2 = knn(ref, ref, 16, sorted=False)
+    assert idx.shape == (2, 10, 10)
+    assert torch.equal(idx.sort(-1).values, torch.arange(10).expand(2, 10, 10))
+    assert torch.equal(d2.gather(-1, idx), torch.cdist(ref, ref).square().gather(-1, idx))
+    ordered, d2_sorted = knn(ref, ref, 16)
+    assert torch.equal(ordered[..., 0], torch.arange(10).expand(2, 10))  # each point is its own nearest
+    assert torch.all(d2_sorted[..., 1:] >= d2_sorted[..., :-1])
 
 
 @pytest.mark.parametrize(("N", "B", "chunk"), [(256, 1, None), (256, 7, 3 * 32 * 1024), (512, 5, None), (100, 4, 1)])

@@ -11,7 +11,8 @@
 Sizes are modest so that 1024-point inference is a few milliseconds on a CPU: a per-point
 embedding (no attention at full resolution), then N → N/8 → N/32 with attention at both levels.
 The forward passes evaluate these formulas in a cheaper order (projections before gathers,
-folded biases, late softmax normalisation, CPU batches in chunks) with the same FPS and kNN;
+folded biases, late softmax normalisation, CPU batches in chunks, one kNN search shared by the
+first attention block and the second transition down) with the same FPS and kNN sets;
 ``tests/test_perception_backbone_equivalence.py`` pins them to the plain formulation.
 """
 
@@ -86,8 +87,10 @@ class PointTransformerBlock(nn.Module):
         self.norm1, self.norm2 = nn.LayerNorm(dim), nn.LayerNorm(dim)
         self.k = k
 
-    def forward(self, xyz: torch.Tensor, feats: torch.Tensor) -> torch.Tensor:
-        idx, _ = knn(xyz, xyz, self.k)
+    def forward(self, xyz: torch.Tensor, feats: torch.Tensor, idx: torch.Tensor | None = None) -> torch.Tensor:
+        """``xyz (B, N, 3)``, ``feats (B, N, D)``; ``idx (B, N, k)``: the points' kNN, if known."""
+        if idx is None:
+            idx, _ = knn(xyz, xyz, self.k, sorted=False)
         h = torch.relu(self.norm1(self.inp(feats)))
         h = torch.relu(self.norm2(self.layer(xyz, h, idx)))
         return torch.relu(feats + self.out(h))
@@ -101,9 +104,13 @@ class TransitionDown(nn.Module):
         self.k = k
         self.mlp = nn.Sequential(nn.Linear(c_in + 3, c_out), nn.LayerNorm(c_out), nn.ReLU(inplace=True))
 
-    def forward(self, xyz: torch.Tensor, feats: torch.Tensor, centre_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(
+        self, xyz: torch.Tensor, feats: torch.Tensor, centre_idx: torch.Tensor, idx: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Pool onto ``xyz[centre_idx]``; ``idx (B, M, k)``: the centres' kNN in ``xyz``, if known."""
         centres = gather_points(xyz, centre_idx)
-        idx, _ = knn(centres, xyz, self.k)
+        if idx is None:
+            idx, _ = knn(centres, xyz, self.k, sorted=False)
         lin, norm = self.mlp[0], self.mlp[1]
         # W [p_j − p_i, f_j] + b = (W [p_j, f_j] + b) − W_p p_i: project the N source points once
         # and gather the projections, instead of projecting M·k gathered rows.
@@ -161,9 +168,13 @@ class PointTransformer(nn.Module):
     def _encode(self, x: torch.Tensor, xyz: torch.Tensor, fps: torch.Tensor) -> torch.Tensor:
         """The levels after FPS for clouds ``x (b, N, C)`` with their FPS indices ``(b, m1)``."""
         xyz1, f1 = self.td1(xyz, self.embed(x), fps)
-        f1 = self.pt1(xyz1, f1)
+        idx1, _ = knn(xyz1, xyz1, self.pt1.k, sorted=False)
+        f1 = self.pt1(xyz1, f1, idx1)
         m2 = min(self.m2, fps.shape[1])
         ar = torch.arange(m2, device=x.device).expand(x.shape[0], m2)
-        xyz2, f2 = self.td2(xyz1, f1, ar)
+        # The level-2 centres are the first m2 level-1 points (FPS prefix), so their kNN among
+        # the level-1 points are the first m2 rows of the block's kNN.
+        td2_idx = idx1[:, :m2] if self.td2.k == self.pt1.k else None
+        xyz2, f2 = self.td2(xyz1, f1, ar, td2_idx)
         f2 = self.pt2(xyz2, f2)
         return f2.amax(dim=1)
