@@ -20,11 +20,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from generator.files import write_atomic
 from perception.data import PointCloudPoseDataset, PointCloudSample
+from perception.error_plots import plot_errors
 from perception.pose_net import PoseNet, PoseNetConfig
 from perception.synthetic_views import ViewConfig, default_models, generate_samples
 from perception.train import TrainConfig, evaluate, train
@@ -107,7 +107,7 @@ def run_ablation(
         print(f"[{i + 1}/{len(variants)}] {v.name}: geo {m.mean_geodesic_deg:.2f}° axis {m.mean_axis_deg:.2f}°", file=sys.stderr)
         if i == 0:
             meta = [te.samples[j].meta for j in idx]
-            plot_errors(g, a, meta, out, title=v.name)
+            plot_errors({"geodesic": g, "stem axis": a}, meta, out, title=v.name)
         write_atomic(rows_path, json.dumps(rows, indent=2))
         write_atomic(out / "ablation.md", markdown_table(rows))
     return rows
@@ -125,53 +125,6 @@ def markdown_table(rows: Sequence[dict]) -> str:
             f"{r['median_axis_deg']:.2f} | {r['inference_ms']:.2f} |"
         )
     return "\n".join(lines) + "\n"
-
-
-def _binned(x: np.ndarray, y: np.ndarray, bins: int = 8) -> tuple[np.ndarray, np.ndarray]:
-    edges = np.quantile(x, np.linspace(0, 1, bins + 1))
-    centres, means = [], []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-        sel = (x >= lo) & (x <= hi)
-        if sel.any():
-            centres.append(x[sel].mean())
-            means.append(y[sel].mean())
-    return np.array(centres), np.array(means)
-
-
-def plot_errors(geo_deg: np.ndarray, axis_deg: np.ndarray, meta: Sequence[dict], out: Path, title: str = "") -> None:
-    """Mean geodesic and axis error against roll, pitch, yaw (degrees) and cap diameter (mm)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), sharey=True)
-    for ax, key in zip(axes, ("roll", "pitch", "yaw"), strict=True):
-        x = np.degrees([m[key] for m in meta])
-        for y, label in ((geo_deg, "geodesic"), (axis_deg, "stem axis")):
-            c, mu = _binned(x, y)
-            ax.plot(c, mu, "o-", label=label)
-        ax.set_xlabel(f"{key} (°)")
-        ax.grid(alpha=0.3)
-    axes[0].set_ylabel("mean error (°)")
-    axes[0].legend()
-    fig.suptitle(f"Pose error vs mushroom angles — {title}")
-    fig.tight_layout()
-    fig.savefig(out / "error_vs_angles.png", dpi=110)
-    plt.close(fig)
-    fig, ax = plt.subplots(figsize=(5, 3.6))
-    x = np.array([m["cap_diameter"] for m in meta]) * 1e3
-    for y, label in ((geo_deg, "geodesic"), (axis_deg, "stem axis")):
-        c, mu = _binned(x, y)
-        ax.plot(c, mu, "o-", label=label)
-    ax.set_xlabel("cap diameter (mm)")
-    ax.set_ylabel("mean error (°)")
-    ax.grid(alpha=0.3)
-    ax.legend()
-    ax.set_title(f"Pose error vs size — {title}")
-    fig.tight_layout()
-    fig.savefig(out / "error_vs_size.png", dpi=110)
-    plt.close(fig)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

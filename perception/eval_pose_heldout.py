@@ -10,7 +10,10 @@ default target). Metrics: geodesic and stem-axis errors (degrees), and the axis 
 and the mean/median axis error by visible points and by the stem's angle to the camera axis.
 
     python -m perception.eval_pose_heldout --scenes runs/pose_scenes_heldout --split test \\
-        [--checkpoint PATH] [--json OUT.json]
+        [--checkpoint PATH] [--json OUT.json] [--plots DIR]
+
+``--plots DIR`` draws the stem-axis error of the training-model views against roll, pitch, yaw
+and cap size (:func:`perception.error_plots.plot_errors`, the paper's Figures 9–10).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import numpy as np
 import torch
 
 from perception.data import PointCloudSample, samples_from_scenes
+from perception.error_plots import plot_errors
 from perception.estimator import PoseEstimator, default_weights_path
 from perception.synthetic_views import default_models, generate_samples
 
@@ -43,18 +47,25 @@ def _by_bin(err: np.ndarray, value: np.ndarray, edges: Sequence[float]) -> dict[
     return out
 
 
-def _metrics(est: PoseEstimator, samples: Sequence[PointCloudSample], batch: int = 64) -> dict[str, float]:
-    t = time.perf_counter()
+def estimate_errors(est: PoseEstimator, samples: Sequence[PointCloudSample], batch: int = 64) -> dict[str, np.ndarray]:
+    """Per-sample errors in degrees: ``geodesic``, stem ``axis``, and ``upright`` (the axis
+    error of the "always upright" prior, i.e. the stem's angle to the camera's -z)."""
     preds = []
     for i in range(0, len(samples), batch):
         preds += [e.rotation for e in est.estimate_batch([s.points for s in samples[i : i + batch]])]
     R_pred = np.stack(preds)
     R_gt = np.stack([np.asarray(s.rotation, dtype=np.float64) for s in samples])
     tr = np.einsum("nij,nij->n", R_pred, R_gt)
-    geo = np.degrees(np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0)))
     ax_gt = R_gt[:, :, 2] / np.linalg.norm(R_gt[:, :, 2], axis=1, keepdims=True)
-    ax = np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", R_pred[:, :, 2], ax_gt), -1.0, 1.0)))
-    up = np.degrees(np.arccos(np.clip(-ax_gt[:, 2], -1.0, 1.0)))
+    return {
+        "geodesic": np.degrees(np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))),
+        "axis": np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", R_pred[:, :, 2], ax_gt), -1.0, 1.0))),
+        "upright": np.degrees(np.arccos(np.clip(-ax_gt[:, 2], -1.0, 1.0))),
+    }
+
+
+def _metrics(samples: Sequence[PointCloudSample], err: dict[str, np.ndarray], seconds: float) -> dict[str, float]:
+    geo, ax, up = err["geodesic"], err["axis"], err["upright"]
     return {
         "n": len(samples),
         "mean_geodesic_deg": float(geo.mean()),
@@ -63,10 +74,17 @@ def _metrics(est: PoseEstimator, samples: Sequence[PointCloudSample], batch: int
         "median_axis_deg": float(np.median(ax)),
         "p90_axis_deg": float(np.percentile(ax, 90)),
         "upright_prior_mean_axis_deg": float(up.mean()),
-        "seconds": time.perf_counter() - t,
+        "seconds": seconds,
         "by_visible_points": _by_bin(ax, np.array([s.meta.get("num_valid", len(s.points)) for s in samples]), POINT_BINS),
         "by_tilt_to_camera_deg": _by_bin(ax, up, TILT_BINS),
     }
+
+
+def evaluate_set(est: PoseEstimator, samples: Sequence[PointCloudSample]) -> tuple[dict[str, float], dict[str, np.ndarray]]:
+    """Summary metrics (the README table's columns and breakdowns) and per-sample errors."""
+    t = time.perf_counter()
+    err = estimate_errors(est, samples)
+    return _metrics(samples, err, time.perf_counter() - t), err
 
 
 def tallest_per_scene(root: str | Path, samples: Sequence[PointCloudSample]) -> list[PointCloudSample]:
@@ -93,6 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--views", type=int, default=1, help="test-time views averaged per cloud (PoseEstimator views)")
     p.add_argument("--upright-pass", action="store_true", help="PoseEstimator upright_pass: views again on the uprighted cloud")
     p.add_argument("--json", help="also write the results here")
+    p.add_argument("--plots", help="folder for stem-axis error vs roll/pitch/yaw and vs cap size (synthetic training-model views)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
@@ -101,15 +120,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.no_synthetic:
         for label, seed, ids in (("synthetic views, training models (ids 0-5), seed 3001", 3001, (0, 1, 2, 3, 4, 5)),
                                  ("synthetic views, held-out models (id 6), seed 3002", 3002, (6,))):
-            out[label] = _metrics(est, generate_samples(args.num, seed, default_models(model_ids=ids)))
+            samples = generate_samples(args.num, seed, default_models(model_ids=ids))
+            out[label], err = evaluate_set(est, samples)
             print(label, json.dumps(out[label]), flush=True)
+            if args.plots and seed == 3001:
+                title = f"{path.name}, {args.views} view{'s' if args.views > 1 else ''}, {len(samples)} synthetic views"
+                for png in plot_errors({"stem axis": err["axis"]}, [s.meta for s in samples], args.plots, title):
+                    print(f"wrote {png}", flush=True)
     if args.scenes:
         split = None if args.split == "all" else args.split
         samples = samples_from_scenes(args.scenes, split, seed=0)
         for label, ss in ((f"scenes {args.scenes} ({args.split}), every instance", samples),
                           (f"scenes {args.scenes} ({args.split}), tallest mushroom per scene",
                            tallest_per_scene(args.scenes, samples))):
-            out[label] = _metrics(est, ss)
+            out[label], _ = evaluate_set(est, ss)
             print(label, json.dumps(out[label]), flush=True)
     if args.json:
         Path(args.json).write_text(json.dumps({"checkpoint": str(path), "views": args.views, "upright_pass": args.upright_pass, "results": out}, indent=2))
