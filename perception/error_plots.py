@@ -61,7 +61,7 @@ def plot_errors(
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
     ax.legend()
-    ax.set_title(f"Pose error vs size — {title}")
+    ax.set_title(f"Pose error vs size\n{title}", fontsize=10)
     fig.tight_layout()
     fig.savefig(size_png, dpi=110)
     plt.close(fig)
