@@ -3,8 +3,10 @@
 Estimates are matched to ground-truth mushrooms by mask IoU (>= 0.5, greedily by score) against
 the visible whole-mushroom masks; masks under ``min_area`` pixels are not counted (as in
 ``detector_eval``). Matched mushrooms get the stem-axis error (angle between the estimated and
-true stem axes) and the geodesic error of the full rotation; both are broken down by cap size,
-tilt and occlusion (the cap's visible fraction from the COCO annotations).
+true stem axes), the geodesic error of the full rotation, and the error of the estimated cap top
+(the point a picker aims at) in millimetres, in all and across the true stem axis; the angles
+are broken down by cap size, tilt and occlusion (the cap's visible fraction from the COCO
+annotations).
 """
 
 from __future__ import annotations
@@ -26,6 +28,13 @@ from perception.pipeline import MushroomEstimate, PosePipeline
 SIZE_BINS_MM = (0.0, 35.0, 50.0, 65.0, 200.0)
 TILT_BINS_DEG = (0.0, 10.0, 20.0, 30.0, 90.0)
 VISIBLE_BINS = (0.0, 0.5, 0.8, 0.95, 1.01)
+#: Per-mushroom errors of a matched estimate, with their labels in the Markdown report.
+ERROR_KEYS = {
+    "axis_error_deg": "axis error (°)",
+    "geodesic_error_deg": "geodesic error (°)",
+    "cap_top_error_mm": "cap top position (mm)",
+    "cap_top_lateral_error_mm": "cap top across the stem axis (mm)",
+}
 
 
 @dataclass(frozen=True)
@@ -34,6 +43,7 @@ class GroundTruthMushroom:
     instance_id: int
     mask: np.ndarray
     rotation: np.ndarray
+    cap_top: np.ndarray  # world frame, metres
     cap_diameter_mm: float
     tilt_deg: float
     visible_fraction: float
@@ -68,11 +78,10 @@ class PipelineReport:
         return np.array([r[key] for r in self.rows if r["matched"]])
 
     def summary(self) -> dict[str, Any]:
-        axis, geo = self.errors("axis_error_deg"), self.errors("geodesic_error_deg")
         stat = lambda a: {"mean": float(a.mean()), "median": float(np.median(a)), "p90": float(np.percentile(a, 90))} if a.size else {}  # noqa: E731
         return {"scenes": self.scenes, "ground_truth": self.ground_truth, "estimates": self.estimates,
                 "matched": self.matched, "recall": self.recall, "precision": self.precision,
-                "axis_error_deg": stat(axis), "geodesic_error_deg": stat(geo),
+                **{key: stat(self.errors(key)) for key in ERROR_KEYS},
                 "seconds_per_scene": self.seconds / max(self.scenes, 1),
                 "by_cap_diameter_mm": self.breakdown("cap_diameter_mm", SIZE_BINS_MM),
                 "by_tilt_deg": self.breakdown("tilt_deg", TILT_BINS_DEG),
@@ -95,10 +104,10 @@ class PipelineReport:
                  f"recall {s['recall']:.3f}, precision {s['precision']:.3f}, "
                  f"{s['seconds_per_scene']:.2f} s per scene", ""]
         if s["axis_error_deg"]:
-            lines += ["| error of matched mushrooms | mean ° | median ° | 90th pct ° |", "|---|---:|---:|---:|"]
-            for name in ("axis_error_deg", "geodesic_error_deg"):
+            lines += ["| error of matched mushrooms | mean | median | 90th pct |", "|---|---:|---:|---:|"]
+            for name, label in ERROR_KEYS.items():
                 e = s[name]
-                lines.append(f"| {name.replace('_deg', '').replace('_', ' ')} | {e['mean']:.1f} | {e['median']:.1f} | {e['p90']:.1f} |")
+                lines.append(f"| {label} | {e['mean']:.1f} | {e['median']:.1f} | {e['p90']:.1f} |")
         for title, key in (("cap diameter (mm)", "by_cap_diameter_mm"), ("tilt (°)", "by_tilt_deg"),
                            ("visible cap fraction", "by_visible_fraction")):
             lines += ["", f"| {title} | n | recall | mean axis ° | mean geodesic ° |", "|---|---:|---:|---:|---:|"]
@@ -119,7 +128,8 @@ def ground_truth(sample: SceneSample, min_area: int = 16) -> list[GroundTruthMus
         if mask.sum() < min_area:
             continue
         rot = np.asarray(inst["rotation"], dtype=float)
-        out.append(GroundTruthMushroom(sample.index, inst["id"], mask, rot, 1000.0 * inst["cap_diameter"],
+        out.append(GroundTruthMushroom(sample.index, inst["id"], mask, rot, np.asarray(inst["cap_top"], dtype=float),
+                                       1000.0 * inst["cap_diameter"],
                                        float(np.degrees(tilt_angle(rot))), float(visible.get(inst["id"], 0.0))))
     return out
 
@@ -132,7 +142,7 @@ def match(estimates: list[MushroomEstimate], truth: list[GroundTruthMushroom], m
     """One row per ground-truth mushroom: matched (IoU >= ``min_iou``) with its errors, or missed."""
     rows = [{"scene_id": g.scene_id, "instance_id": g.instance_id, "cap_diameter_mm": g.cap_diameter_mm,
              "tilt_deg": g.tilt_deg, "visible_fraction": g.visible_fraction, "matched": False,
-             "iou": 0.0, "axis_error_deg": float("nan"), "geodesic_error_deg": float("nan")} for g in truth]
+             "iou": 0.0, **dict.fromkeys(ERROR_KEYS, float("nan"))} for g in truth]
     taken = np.zeros(len(truth), bool)
     for est in sorted(estimates, key=lambda e: -e.detection.score):
         m = est.detection.mask
@@ -142,7 +152,11 @@ def match(estimates: list[MushroomEstimate], truth: list[GroundTruthMushroom], m
         j = int(ious.argmax())
         taken[j] = True
         g = truth[j]
+        offset = est.cap_top_world - g.cap_top
+        axis = g.rotation[:, 2]
         rows[j].update(matched=True, iou=float(ious[j]),
+                       cap_top_error_mm=1000.0 * float(np.linalg.norm(offset)),
+                       cap_top_lateral_error_mm=1000.0 * float(np.linalg.norm(offset - (offset @ axis) * axis)),
                        axis_error_deg=_angle_deg(est.stem_axis_world @ g.rotation[:, 2]),
                        geodesic_error_deg=_angle_deg((np.trace(g.rotation.T @ est.rotation_world) - 1.0) / 2.0))
     return rows

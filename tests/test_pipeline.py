@@ -6,7 +6,7 @@ from generator.camera import project
 from generator.dataset.render import SceneRenderer
 from perception.detector import detections_from_labels
 from perception.estimator import PoseEstimator
-from perception.pipeline import PipelineInputError, PosePipeline, above_soil
+from perception.pipeline import PipelineInputError, PosePipeline, above_soil, estimate_cap_top
 from perception.pose_net import PoseNet, PoseNetConfig
 
 
@@ -90,3 +90,23 @@ def test_above_soil_trims_a_mask_that_spills_onto_the_soil():
     spilled = (yy - 30) ** 2 + (xx - 40) ** 2 <= 13 ** 2
     assert np.array_equal(above_soil(spilled, depth, 0.006), cap)
     assert np.array_equal(above_soil(cap, np.zeros_like(depth), 0.006), cap)  # no depth around: unchanged
+
+
+def test_cap_top_is_the_apex_of_a_dome_seen_from_one_side() -> None:
+    # A spherical cap (radius 30 mm) about a tilted axis, keeping the points whose normals face
+    # a camera off to one side: the centroid of what it sees is off the axis, the apex is not.
+    rng = np.random.default_rng(0)
+    axis = np.array([np.sin(0.3), 0.0, np.cos(0.3)])
+    normals = rng.normal(size=(20000, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = normals[normals @ axis > np.cos(0.9)]
+    to_camera = np.array([-0.6, 0.3, 0.74])
+    normals = normals[normals @ to_camera > 0.2]
+    centre = np.array([0.1, -0.05, 0.3])
+    points, apex = centre + 0.03 * normals, centre + 0.03 * axis
+    off_axis = points.mean(0) - centre - ((points.mean(0) - centre) @ axis) * axis
+    assert np.linalg.norm(off_axis) > 0.004  # the axis through the centroid misses by > 4 mm
+    assert np.linalg.norm(estimate_cap_top(points, axis) - apex) < 0.001
+    # A few stray points above the cap do not move it (the top is a high percentile, not the max).
+    strays = apex + 0.01 * axis + rng.normal(0, 0.002, (10, 3))
+    assert np.linalg.norm(estimate_cap_top(np.vstack([points, strays]), axis) - apex) < 0.0015
