@@ -42,6 +42,12 @@ def test_heldout_cli_scores_the_shipped_weights(tmp_path, capsys) -> None:
     assert "wrote" in capsys.readouterr().out
 
 
+def test_plots_without_synthetic_views_is_refused(tmp_path, capsys) -> None:
+    with pytest.raises(SystemExit):
+        eval_pose_heldout.main(["--no-synthetic", "--plots", str(tmp_path)])
+    assert "drop --no-synthetic" in capsys.readouterr().err
+
+
 def test_estimate_errors_are_zero_for_the_truth() -> None:
     class Oracle:
         def estimate_batch(self, clouds):
