@@ -25,6 +25,13 @@ def binned_means(x: np.ndarray, y: np.ndarray, bins: int = 8) -> tuple[np.ndarra
     return np.array(centres), np.array(means)
 
 
+def _plot_series(ax, x: np.ndarray, errors: Mapping[str, np.ndarray]) -> None:
+    for label, y in errors.items():
+        ax.plot(*binned_means(x, y), "o-", label=label)
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+
+
 def plot_errors(
     errors: Mapping[str, np.ndarray], meta: Sequence[dict], out: str | Path, title: str = ""
 ) -> tuple[Path, Path]:
@@ -40,26 +47,18 @@ def plot_errors(
     angles_png, size_png = out / "error_vs_angles.png", out / "error_vs_size.png"
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), sharey=True)
     for ax, key in zip(axes, ("roll", "pitch", "yaw"), strict=True):
-        x = np.degrees([m[key] for m in meta])
-        for label, y in errors.items():
-            ax.plot(*binned_means(x, y), "o-", label=label)
+        _plot_series(ax, np.degrees([m[key] for m in meta]), errors)
         ax.set_xlabel(f"{key} (°)")
-        ax.grid(alpha=0.3)
     axes[0].set_ylabel("mean error (°)")
-    axes[0].set_ylim(bottom=0)
     axes[0].legend()
     fig.suptitle(f"Pose error vs mushroom angles — {title}")
     fig.tight_layout()
     fig.savefig(angles_png, dpi=110)
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(5, 3.6))
-    x = np.array([m["cap_diameter"] for m in meta]) * 1e3
-    for label, y in errors.items():
-        ax.plot(*binned_means(x, y), "o-", label=label)
+    _plot_series(ax, np.array([m["cap_diameter"] for m in meta]) * 1e3, errors)
     ax.set_xlabel("cap diameter (mm)")
     ax.set_ylabel("mean error (°)")
-    ax.set_ylim(bottom=0)
-    ax.grid(alpha=0.3)
     ax.legend()
     ax.set_title(f"Pose error vs size\n{title}", fontsize=10)
     fig.tight_layout()

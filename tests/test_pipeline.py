@@ -4,9 +4,16 @@ import pytest
 from generator import SceneConfig, generate_scene
 from generator.camera import project
 from generator.dataset.render import SceneRenderer
-from perception.detector import detections_from_labels
+from perception.detector import Detection, detections_from_labels
 from perception.estimator import PoseEstimator
-from perception.pipeline import PipelineInputError, PosePipeline, above_soil, estimate_cap_top
+from perception.eval_pipeline import GroundTruthMushroom, match
+from perception.pipeline import (
+    MushroomEstimate,
+    PipelineInputError,
+    PosePipeline,
+    above_soil,
+    estimate_cap_top,
+)
 from perception.pose_net import PoseNet, PoseNetConfig
 
 
@@ -110,3 +117,18 @@ def test_cap_top_is_the_apex_of_a_dome_seen_from_one_side() -> None:
     # A few stray points above the cap do not move it (the top is a high percentile, not the max).
     strays = apex + 0.01 * axis + rng.normal(0, 0.002, (10, 3))
     assert np.linalg.norm(estimate_cap_top(np.vstack([points, strays]), axis) - apex) < 0.0015
+
+
+def test_match_splits_the_cap_top_error_along_and_across_the_stem():
+    # A mushroom tilted 90° about x (stem along -y) and an estimate whose cap top is 3 mm along
+    # the stem and 4 mm across it: 5 mm in all, 4 mm across.
+    mask = np.zeros((8, 8), bool)
+    mask[2:5, 2:5] = True
+    rot = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+    top = np.array([0.01, 0.02, 0.03])
+    truth = GroundTruthMushroom(0, 0, mask, rot, top, 40.0, 90.0, 1.0)
+    est_top = top + 0.003 * rot[:, 2] + np.array([0.004, 0.0, 0.0])
+    est = MushroomEstimate(Detection(mask, (2, 2, 4, 4), 1.0, 0), rot, est_top, est_top, rot, est_top, est_top, 100)
+    (row,) = match([est], [truth])
+    assert row["matched"] and row["axis_error_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert row["cap_top_error_mm"] == pytest.approx(5.0) and row["cap_top_lateral_error_mm"] == pytest.approx(4.0)
