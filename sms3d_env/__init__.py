@@ -1,4 +1,5 @@
-"""Gymnasium environments for robotic mushroom picking (``SMS3DPick-v0``, ``SMS3DPickSparse-v0``)."""
+"""Gymnasium environments for robotic mushroom picking (``SMS3DPick-v0``, ``SMS3DPickSparse-v0``,
+``SMS3DPickTrain-v0``: the learnable training options)."""
 
 import os
 
@@ -25,8 +26,14 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 
+#: The training options of ``SMS3DPick-v0`` (see ``SMS3DPickEnv``): latched suction, the staged
+#: reward, episodes that end at dead ends, and observations in the estimated target's frame.
+TRAIN_OPTIONS = {"reward_type": "staged", "suction_mode": "latched", "end_on_dead_end": True,
+                 "task_obs": True}
+
 for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
-                 ("SMS3DPickSparse-v0", {"reward_type": "sparse"})):
+                 ("SMS3DPickSparse-v0", {"reward_type": "sparse"}),
+                 ("SMS3DPickTrain-v0", TRAIN_OPTIONS)):
     if _id not in registry:
         register(id=_id, entry_point="sms3d_env.pick_env:SMS3DPickEnv", max_episode_steps=250,
                  kwargs=_kw)

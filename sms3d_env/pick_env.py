@@ -9,7 +9,9 @@ physics steps run with the picking model of ``physics.py`` checked after each.
 
 from __future__ import annotations
 
+import math
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -25,7 +27,7 @@ from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.hand import HandGrasp, add_stem_sockets
 from sms3d_env.physics import PickPhysicsParams
 from sms3d_env.pose_source import PoseEstimate, PoseSource, make_pose_source
-from sms3d_env.rewards import REWARD_TYPES, RewardState, compute_reward
+from sms3d_env.rewards import REWARD_TYPES, RewardState, compute_reward, reward_terms
 from sms3d_env.robot import (
     ARM_JOINTS,
     CUP_BODY,
@@ -33,10 +35,13 @@ from sms3d_env.robot import (
     PREFIX,
     TOOL_SITE,
     TOOLS,
+    WRIST_FORCE,
+    WRIST_TORQUE,
     RobotConfig,
     attach_robot,
 )
-from sms3d_env.targets import Reachability, select_target
+from sms3d_env.targets import RULES, Reachability, select_target
+from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
 
 FAILURE_CAUSES = ("no_seal", "grip_lost", "not_detached", "bruised", "neighbour_disturbed",
                   "unreachable", "timeout", "unstable_simulation")
@@ -46,8 +51,45 @@ _STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 # State observation entries and their sizes, in the order of the flat vector they are cut from.
 _OBS_SIZES = {"joint_pos": 6, "joint_vel": 6, "tool_pose": 7, "suction": 3, "target_pose": 6,
               "target_rel": 3}
-_OBS_SLICES = {k: slice(end - n, end) for (k, n), end in
-               zip(_OBS_SIZES.items(), np.cumsum(list(_OBS_SIZES.values())).tolist(), strict=True)}
+SUCTION_MODES = ("momentary", "latched")
+
+
+def _slices(sizes: dict[str, int]) -> dict[str, slice]:
+    ends = np.cumsum(list(sizes.values())).tolist()
+    return {k: slice(end - n, end) for (k, n), end in zip(sizes.items(), ends, strict=True)}
+
+
+def _check_args(pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
+                image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
+                scene_config: Any) -> None:
+    """Refuse arguments the env could not honour or would silently ignore (ValueError/TypeError
+    naming the argument)."""
+    for name, v in (("pose_error_deg", pose_error_deg), ("position_noise", position_noise)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+    if pose_source != "noisy" and (pose_error_deg or position_noise):
+        raise ValueError(f"pose_error_deg and position_noise apply to pose_source='noisy' only; with "
+                         f"pose_source={pose_source!r} they would be ignored (got pose_error_deg="
+                         f"{pose_error_deg!r}, position_noise={position_noise!r})")
+    if target_rule not in RULES:
+        raise ValueError(f"target_rule must be one of {RULES}, got {target_rule!r}")
+    for name, size in (("image_size", image_size), ("render_size", render_size)):
+        ok = (isinstance(size, (tuple, list)) and len(size) == 2
+              and all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1 for n in size))
+        if not ok:
+            raise ValueError(f"{name} must be two integers >= 1 (height, width), got {size!r}")
+    if isinstance(max_tilt_deg, bool) or not isinstance(max_tilt_deg, (int, float)) \
+            or not (math.isfinite(max_tilt_deg) and 0 <= max_tilt_deg <= 90):
+        raise ValueError(f"max_tilt_deg must be a finite number in [0, 90], got {max_tilt_deg!r}")
+    if free_radius is not None and (isinstance(free_radius, bool) or not isinstance(free_radius, (int, float))
+                                    or not (math.isfinite(free_radius) and free_radius > 0)):
+        raise ValueError(f"free_radius must be None or a finite number > 0 (m), got {free_radius!r}")
+    if scene_config is not None:
+        from generator.config import SceneConfig
+
+        if not isinstance(scene_config, SceneConfig):
+            raise TypeError(f"scene_config must be a generator.SceneConfig or None, got "
+                            f"{type(scene_config).__name__} {scene_config!r}")
 
 
 @dataclass
@@ -70,6 +112,10 @@ class _EpisodeState:
     disturbed: set[int] = field(default_factory=set)
     unstable: bool = False
     max_lift: float = 0.0
+    root_util: float = 0.0  # target root load / capacity in the last physics step (reward only)
+    seal_step: int = -1  # env step at which the current seal formed (-1: none)
+    seal_tool_x: np.ndarray | None = None  # tool x axis (world) when it formed
+    done: bool = False  # the episode terminated or was truncated
 
 
 class SMS3DPickEnv(gym.Env):
@@ -103,6 +149,21 @@ class SMS3DPickEnv(gym.Env):
         control_dt, substeps: control period (s) and physics steps per control step.
         image_obs: add ``rgb`` (uint8) and ``depth`` (float32, m) of ``image_size`` to the
             observation, from ``camera``.
+        suction_mode: ``"momentary"`` (default: any command <= 0 releases the seal) or
+            ``"latched"`` (the vacuum valve holds its state: once a seal forms it stays on
+            whatever the command, as a picker's valve does after its vacuum switch trips).
+        end_on_dead_end: also terminate (as a failure) when the episode can no longer succeed:
+            the target detached but not held, or (latched suction) a seal on another mushroom.
+        task_obs: add the entries of :mod:`sms3d_env.task_obs`: ``tool_in_target`` (tool offset
+            and axis in the *estimated* target frame, their angle), ``progress`` (time since
+            reset and since the seal, twist since the seal) and ``wrist_wrench`` (wrist F/T).
+        horizon: control steps per episode that the staged reward's success bonus assumes (the
+            registered time limit, 250).
+
+    Training options (``SMS3DPickTrain-v0`` sets them all: ``suction_mode="latched"``,
+    ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``): see
+    ``sms3d_env.rewards.reward_terms`` for the staged reward's table. Its terms are reported in
+    ``info`` as ``reward_stage``, ``reward_progress`` and ``reward_success_bonus``.
     """
 
     metadata = {"render_modes": ["rgb_array", "depth_array"], "render_fps": 25}
@@ -130,6 +191,10 @@ class SMS3DPickEnv(gym.Env):
         max_tilt_deg: float = 45.0,
         free_radius: float | None = 0.10,
         tool: str | None = None,
+        suction_mode: str = "momentary",
+        end_on_dead_end: bool = False,
+        task_obs: bool = False,
+        horizon: int = 250,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
@@ -141,10 +206,18 @@ class SMS3DPickEnv(gym.Env):
             raise ValueError(f"substeps must be an integer >= 1, got {substeps!r}")
         if tool is not None and tool not in TOOLS:
             raise ValueError(f"tool must be one of {TOOLS}, got {tool!r}")
+        if suction_mode not in SUCTION_MODES:
+            raise ValueError(f"suction_mode must be one of {SUCTION_MODES}, got {suction_mode!r}")
+        if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
+            raise ValueError(f"horizon must be an integer >= 1, got {horizon!r}")
+        _check_args(pose_source, pose_error_deg, position_noise, target_rule, image_size,
+                    render_size, max_tilt_deg, free_radius, scene_config)
         self.robot_cfg = robot or RobotConfig()
         if tool is not None:
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
+        if self.tool != "suction" and suction_mode != "momentary":
+            raise ValueError(f"suction_mode={suction_mode!r} applies to the suction tool only (tool={self.tool!r})")
         if scenes is not None and len(scenes) == 0:
             raise ValueError("scenes must be a non-empty sequence")
         self.render_mode = render_mode
@@ -166,6 +239,8 @@ class SMS3DPickEnv(gym.Env):
         self.camera, self.render_size = camera, tuple(render_size)
         self.max_tilt_deg = max_tilt_deg
         self.free_radius = free_radius
+        self.suction_mode, self.end_on_dead_end = suction_mode, bool(end_on_dead_end)
+        self.task_obs, self.horizon = bool(task_obs), horizon
 
         self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
         self.home_q = np.asarray(self.robot_cfg.home_q, float)
@@ -173,7 +248,9 @@ class SMS3DPickEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, (7,), np.float32)
         self._twist_scale = np.repeat([self.ctrl_cfg.max_linear_speed, self.ctrl_cfg.max_angular_speed], 3)
         inf = np.inf
-        obs = {k: spaces.Box(-inf, inf, (n,), np.float64) for k, n in _OBS_SIZES.items()}
+        self._obs_sizes = {**_OBS_SIZES, **(TASK_OBS_SIZES if self.task_obs else {})}
+        self._obs_slices = _slices(self._obs_sizes)
+        obs = {k: spaces.Box(-inf, inf, (n,), np.float64) for k, n in self._obs_sizes.items()}
         if image_obs:
             h, w = self.image_size
             obs["rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
@@ -283,6 +360,8 @@ class SMS3DPickEnv(gym.Env):
             self.cup_geom = -1  # no geom id: the seal test never fires
             self.hand = HandGrasp(m)
         self.tool_site = m.site(PREFIX + TOOL_SITE).id
+        force, torque = m.sensor(PREFIX + WRIST_FORCE), m.sensor(PREFIX + WRIST_TORQUE)
+        self._wrench_adr = np.r_[force.adr[0]:force.adr[0] + 3, torque.adr[0]:torque.adr[0] + 3]
         self.arm_qadr = np.array([m.jnt_qposadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS])
         self.arm_dadr = np.array([m.jnt_dofadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS])
         self.cap_radius = np.array([inst.cap_diameter / 2 for inst in scene.instances])
@@ -336,7 +415,12 @@ class SMS3DPickEnv(gym.Env):
             raise ValueError(f"action contains NaN or inf: {a.tolist()}")
         a = a.clip(-1.0, 1.0)
         m, d, ep = self.model, self.data, self._ep
-        ep.tool_on = bool(a[6] > 0)
+        if ep.done:
+            warnings.warn("step() called after the episode ended (terminated or truncated); call "
+                          "reset(). The episode stays ended.", stacklevel=2)
+        # A latched valve stays open while the seal it made holds, whatever the command.
+        ep.tool_on = bool(a[6] > 0) or (self.suction_mode == "latched" and ep.grip >= 0)
+        ep.root_util = 0.0
         if self.hand is not None:
             self.hand.command(d, float(a[6]))
         elif not ep.tool_on and ep.grip >= 0:
@@ -361,10 +445,13 @@ class SMS3DPickEnv(gym.Env):
         self.steps += 1
         self._update_neighbours()
         success = self._success()
-        terminated = success or bool(ep.bruised) or (ep.target_detached and ep.grip_lost)
+        terminated = (success or bool(ep.bruised) or (ep.target_detached and ep.grip_lost)
+                      or (self.end_on_dead_end and self._dead_end()) or ep.done)
         truncated = ep.unstable
-        reward = self._reward(success)
+        ep.done = terminated or truncated
+        reward, terms = self._reward(success)
         info = self._info(success)
+        info.update({f"reward_{k}": v for k, v in terms.items()})
         if ep.unstable:
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
             mujoco.mj_forward(m, d)
@@ -457,15 +544,16 @@ class SMS3DPickEnv(gym.Env):
         m.geom_conaffinity[self.cup_geom] = 0
         m.geom_contype[self.cup_geom] = ph.SOIL_CONAFFINITY
         ep.grip = k
+        ep.seal_step, ep.seal_tool_x = self.steps, d.site_xmat[self.tool_site, 0::3].copy()
         if k == ep.target:
             ep.ever_gripped_target = True
 
     def _release(self) -> None:
-        self.data.eq_active[self.grip_eq[self._ep.grip]] = 0
+        ep = self._ep
+        self.data.eq_active[self.grip_eq[ep.grip]] = 0
         self.model.geom_contype[self.cup_geom] = self._cup_mask[0]
         self.model.geom_conaffinity[self.cup_geom] = self._cup_mask[1]
-        self._ep.grip = -1
-        self._ep.grip_util = 0.0
+        ep.grip, ep.grip_util, ep.seal_step, ep.seal_tool_x = -1, 0.0, -1, None
 
     def _eq_wrench(self, rows: np.ndarray) -> np.ndarray:
         return ph.wrench_from_rows(self.model, self.data, rows, self._qfrc)
@@ -492,6 +580,8 @@ class SMS3DPickEnv(gym.Env):
                 ep.detached.add(k)
                 if k == ep.target:
                     ep.target_detached = True
+            if k == ep.target:
+                ep.root_util = max(ep.root_util, u)
 
     def grip_wrench(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Load the seal carries: world force the cup exerts on the gripped mushroom, its moment
@@ -569,15 +659,31 @@ class SMS3DPickEnv(gym.Env):
         return bool(ep.target_detached and ep.grip == ep.target and not ep.bruised
                     and not ep.unstable and self._lift() >= self.params.lift_height)
 
-    def _reward(self, success: bool) -> float:
+    def _dead_end(self) -> bool:
+        """The episode can no longer succeed: the target is off its roots and not held (suction;
+        the hand detaches a cap as its fingers close, before it holds it), or a latched seal
+        holds another mushroom."""
+        ep = self._ep
+        if self.hand is not None:
+            return False
+        knocked_off = ep.target_detached and ep.grip != ep.target
+        wrong_seal = self.suction_mode == "latched" and ep.grip >= 0 and ep.grip != ep.target
+        return knocked_off or wrong_seal
+
+    def _reward(self, success: bool) -> tuple[float, dict[str, float]]:
+        """The step's reward and its terms (the staged reward's; empty for the others)."""
         d, ep = self.data, self._ep
         s = RewardState(
             tool_pos=d.site_xpos[self.tool_site], tool_axis=d.site_xmat[self.tool_site, 2::3],
             est_cap_top=ep.target_pose[:3], est_axis=ep.target_pose[3:],
             gripped_target=ep.grip == ep.target, target_detached=ep.target_detached,
             lift=self._lift(), lift_goal=self.params.lift_height, success=success,
-            bruised=bool(ep.bruised))
-        return compute_reward(s, self.reward_type)
+            bruised=bool(ep.bruised), root_utilisation=ep.root_util,
+            steps_left=self.horizon - self.steps)
+        if self.reward_type == "staged":
+            terms = reward_terms(s)
+            return sum(terms.values()), terms
+        return compute_reward(s, self.reward_type), {}
 
     def failure_cause(self) -> str | None:
         """Why the episode is not (yet) a success, or None on success."""
@@ -627,11 +733,14 @@ class SMS3DPickEnv(gym.Env):
             tool = (float(ep.tool_on), float(ep.grip >= 0), ep.grip_util)
         else:
             tool = (self.hand.closure(d), float(ep.grip >= 0), ep.finger_force)
-        flat = np.concatenate([d.qpos[self.arm_qadr], d.qvel[self.arm_dadr], pos, quat, tool,
-                               ep.target_pose, ep.target_pose[:3] - pos])
+        parts = [d.qpos[self.arm_qadr], d.qvel[self.arm_dadr], pos, quat, tool, ep.target_pose,
+                 ep.target_pose[:3] - pos]
+        if self.task_obs:
+            parts += self._task_obs()
+        flat = np.concatenate(parts)
         if not np.isfinite(flat).all():
             flat = np.nan_to_num(flat)
-        obs = {k: flat[sl] for k, sl in _OBS_SLICES.items()}
+        obs = {k: flat[sl] for k, sl in self._obs_slices.items()}
         if self.image_obs:
             h, w = self.image_size
             rgb = self._render(h, w, depth=False)
@@ -639,6 +748,18 @@ class SMS3DPickEnv(gym.Env):
             obs["rgb"] = rgb
             obs["depth"] = depth[..., None].astype(np.float32)
         return obs
+
+    def _task_obs(self) -> list[np.ndarray]:
+        """The ``task_obs`` entries (see :mod:`sms3d_env.task_obs`)."""
+        d, ep = self.data, self._ep
+        rot = d.site_xmat[self.tool_site]
+        cap_top, axis = ep.target_pose[:3], ep.target_pose[3:]
+        sealed = ep.seal_step >= 0
+        twist = twist_about(axis, ep.seal_tool_x, rot[0::3]) if sealed else 0.0
+        since_seal = (self.steps - ep.seal_step) * self.control_dt if sealed else 0.0
+        return [tool_in_target(d.site_xpos[self.tool_site], rot[2::3], cap_top, axis),
+                np.array([self.steps * self.control_dt, since_seal, twist]),
+                d.sensordata[self._wrench_adr]]
 
     # ------------------------------------------------------------------ rendering
     def _disown_renderers(self) -> None:

@@ -1,4 +1,9 @@
-"""Rewards: dense shaping (approach, axis alignment, seal, detach, lift) and sparse success."""
+"""Rewards: dense shaping (approach, axis alignment, seal, detach, lift), sparse success, and the
+staged reward of the training env (bounded per step, maximal at success).
+
+Every reward is a pure function of a ``RewardState`` record; ``reward_terms`` returns the staged
+reward's terms, which the env reports in ``info`` (``reward_<term>``).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +12,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-REWARD_TYPES = ("dense", "sparse")
+REWARD_TYPES = ("dense", "sparse", "staged")
+# Staged reward: the floor of each stage (pre-seal approach, sealed with the root holding,
+# detached and held); success pays 1, the per-step maximum.
+STAGE_FLOORS = {"approach": 0.0, "sealed": 0.4, "detached": 0.6}
+APPROACH_WEIGHT, ROOT_WEIGHT, LIFT_WEIGHT = 0.3, 0.2, 0.3
+# tanh scales: 5 mm from the cap top leaves 10 % of the reach term; 5 degrees off the axis 25 %
+# of the alignment term (the seal cone is 20 degrees: the term is steep inside it).
+REACH_SCALE = 20.0  # 1/m
+ALIGN_SCALE = 3.0  # 1/rad
 
 
 @dataclass(frozen=True)
@@ -22,6 +35,8 @@ class RewardState:
     lift_goal: float
     success: bool
     bruised: bool
+    root_utilisation: float = 0.0  # target root load / its detachment capacity (>= 1 detaches)
+    steps_left: int = 0  # control steps until the time limit (the staged success bonus)
 
 
 def compute_reward(s: RewardState, reward_type: str) -> float:
@@ -32,9 +47,13 @@ def compute_reward(s: RewardState, reward_type: str) -> float:
     while held + 5 success - 2 bruise. The detach and lift terms pay only while the cup holds the
     target: paid for detachment alone, PPO learned to knock targets off their roots and collect
     the bonus every step without ever holding one.
+
+    Staged: see ``reward_terms``; the sum of its terms.
     """
     if reward_type == "sparse":
         return 0.0 if s.success else -1.0
+    if reward_type == "staged":
+        return sum(reward_terms(s).values())
     dist = math.dist(s.tool_pos, s.est_cap_top)
     align = -float(s.tool_axis @ s.est_axis)
     r = -dist + 0.1 * align
@@ -43,3 +62,39 @@ def compute_reward(s: RewardState, reward_type: str) -> float:
     r += 2.0 * min(max(s.lift / s.lift_goal, 0.0), 1.0) * held
     r += 5.0 * s.success - 2.0 * s.bruised
     return r
+
+
+def reward_terms(s: RewardState) -> dict[str, float]:
+    """The staged reward's terms; their sum is the step's reward.
+
+    One stage at a time, each starting where the one before ends (robosuite / ManiSkill3 style):
+
+    | stage | when | reward in |
+    | --- | --- | --- |
+    | approach | not holding the target | 0.3 x reach x align in [0, 0.3] |
+    | sealed | holding the target, root intact | 0.4 + 0.2 x min(root load / capacity, 1) |
+    | detached | holding the detached target | 0.6 + 0.3 x lift fraction |
+    | success | detached, held, lifted | 1 + ``steps_left`` |
+
+    reach = 1 - tanh(20/m x distance from the tool to the *estimated* cap top); align = 1 -
+    tanh(3/rad x angle between the cup axis and the estimated stem axis, reversed). Per step the
+    reward is at most 1, reached only at success; the success step also pays ``steps_left`` (the
+    return of holding that maximum until the time limit), so finishing early is never worth less
+    than loitering in a stage below it. A bruise pays 0 (it ends the episode). The root load is
+    privileged simulation state; it shapes the reward only and is never observed.
+    """
+    if s.bruised:
+        return {"stage": 0.0, "progress": 0.0, "success_bonus": 0.0}
+    if s.success:
+        return {"stage": 1.0, "progress": 0.0, "success_bonus": float(max(s.steps_left, 0))}
+    if s.gripped_target and s.target_detached:
+        frac = min(max(s.lift / s.lift_goal, 0.0), 1.0)
+        return {"stage": STAGE_FLOORS["detached"], "progress": LIFT_WEIGHT * frac, "success_bonus": 0.0}
+    if s.gripped_target:
+        load = min(max(s.root_utilisation, 0.0), 1.0)
+        return {"stage": STAGE_FLOORS["sealed"], "progress": ROOT_WEIGHT * load, "success_bonus": 0.0}
+    reach = 1.0 - math.tanh(REACH_SCALE * math.dist(s.tool_pos, s.est_cap_top))
+    cos = float(np.clip(-(s.tool_axis @ s.est_axis) / np.linalg.norm(s.est_axis), -1.0, 1.0))
+    align = 1.0 - math.tanh(ALIGN_SCALE * math.acos(cos))
+    return {"stage": STAGE_FLOORS["approach"], "progress": APPROACH_WEIGHT * reach * align,
+            "success_bonus": 0.0}

@@ -19,6 +19,9 @@ import numpy as np
 PREFIX = "jaco/"
 ARM_JOINTS: tuple[str, ...] = tuple(f"joint_{i}" for i in range(1, 7))
 TOOL_SITE = "cup_site"  # suction: the cup face, +z out of the cup; hand: the grip site
+# Wrist force/torque sensor between the last link and the tool (a real arm's wrist F/T, e.g. an
+# ATI Mini40 under the tool flange): force and torque the tool exerts on the wrist, site frame.
+WRIST_SITE, WRIST_FORCE, WRIST_TORQUE = "wrist_ft", "wrist_force", "wrist_torque"
 CUP_BODY = "cup"
 CUP_GEOM = "cup_face"
 Tool = Literal["suction", "hand"]
@@ -122,6 +125,16 @@ def _add_suction_tool(b6: mujoco.MjsBody, cfg: RobotConfig) -> None:
     cup.add_site(name=TOOL_SITE, pos=[0, 0, -0.008], quat=[0, 1, 0, 0], size=[0.004, 0, 0])
 
 
+def _add_wrist_sensor(spec: mujoco.MjSpec, tool_root: mujoco.MjsBody) -> None:
+    """F/T at ``tool_root``'s origin: MuJoCo's force/torque sensors read the interaction of the
+    site's body (with everything it carries) and its parent, here the wrist link. Outputs only:
+    sensors feed nothing back into the simulation."""
+    tool_root.add_site(name=WRIST_SITE, size=[0.002, 0, 0])
+    for name, kind in ((WRIST_FORCE, mujoco.mjtSensor.mjSENS_FORCE),
+                       (WRIST_TORQUE, mujoco.mjtSensor.mjSENS_TORQUE)):
+        spec.add_sensor(name=name, type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=WRIST_SITE)
+
+
 def _add_hand_tool(b6: mujoco.MjsBody, spec: mujoco.MjSpec, cfg: RobotConfig) -> None:
     """The Jaco 3-finger hand: palm and fingers collide like the suction tool (soil, mushrooms;
     not the arm), each finger joint on a position actuator over its full range."""
@@ -168,8 +181,10 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
     b6 = spec.body("b_6")
     if cfg.tool == "suction":
         _add_suction_tool(b6, cfg)
+        _add_wrist_sensor(spec, spec.body("tool"))
     else:
         _add_hand_tool(b6, spec, cfg)
+        _add_wrist_sensor(spec, spec.body("hand_hand"))
     return spec
 
 
