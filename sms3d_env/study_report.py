@@ -3,6 +3,7 @@ the CSV, PNG and Markdown outputs."""
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -18,14 +19,17 @@ PAPER_ERRORS_DEG = {"SMS3D synthetic (Point Transformer)": 1.67, "SMS3D real (M1
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95 % Wilson score interval for a binomial proportion."""
+    """95 % Wilson score interval for a binomial proportion: ``lo <= successes / n <= hi``, both
+    in [0, 1], ``hi`` exactly 1 for n/n and ``lo`` exactly 0 for 0/n."""
     if n == 0:
         return (math.nan, math.nan)
     p = successes / n
     denom = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    # Exactly, the interval holds p and ends at 1 for n/n (0 for 0/n); rounding can leave an end
+    # an ulp on the wrong side of p (4/4 gives 0.9999999999999999), a negative error bar.
+    return (min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half)))
 
 
 def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]], bool] = lambda r: True) -> list[dict[str, Any]]:
@@ -69,7 +73,6 @@ CSV_COLUMNS = ("variant", "source", "error_deg", "axis_error_deg", "seed", "targ
 
 def write_csv(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
     import csv
-    import io
 
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=CSV_COLUMNS, extrasaction="ignore", lineterminator="\n")
@@ -147,8 +150,10 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     if causes:
         bottom.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
     plt.close(fig)
+    write_atomic(Path(path), buffer.getvalue())
 
 
 def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dict[str, float] | None = None) -> str:
@@ -200,11 +205,18 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
 
 
 def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str = "") -> dict[str, Path]:
-    """CSV, PNG and Markdown summary into ``out``; returns their paths."""
+    """CSV, PNG and Markdown summary into ``out``; returns their paths. Each file is replaced
+    atomically; if any of them fails, none of the three is left (see below)."""
     perception = perception_point(rows)
     out = Path(out)
     paths = {"csv": out / "sweep.csv", "png": out / "sweep.png", "md": out / "summary.md"}
-    write_csv(rows, paths["csv"])
-    plot_sweep(rows, paths["png"], perception)
-    write_atomic(paths["md"], summarise(rows, command, perception))
+    try:
+        write_csv(rows, paths["csv"])
+        plot_sweep(rows, paths["png"], perception)
+        write_atomic(paths["md"], summarise(rows, command, perception))
+    except BaseException:
+        # Files of an earlier report beside this one's would be read as describing these rows.
+        for path in paths.values():
+            path.unlink(missing_ok=True)
+        raise
     return paths

@@ -3,7 +3,10 @@ import dataclasses
 import json
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
+from sms3d_env import study_report
 from sms3d_env.accuracy_study import SweepConfig, plan_tasks, run_sweep
 from sms3d_env.study_report import success_table, tolerable_error, wilson_interval, write_report
 
@@ -13,6 +16,20 @@ def test_wilson_interval_known_values():
     assert lo == pytest.approx(0.4902, abs=1e-3) and hi == pytest.approx(0.9433, abs=1e-3)
     assert wilson_interval(0, 20)[0] == 0.0
     assert wilson_interval(20, 20)[1] == pytest.approx(1.0)
+
+
+def test_wilson_interval_ends_exactly_at_one_and_zero():
+    # 57 sample sizes up to 200 gave an upper bound of 0.9999999999999999 for n/n (4/4 first).
+    for n in range(1, 501):
+        assert wilson_interval(n, n)[1] == 1.0, n
+        assert wilson_interval(0, n)[0] == 0.0, n
+
+
+@given(st.integers(1, 100_000).flatmap(lambda n: st.tuples(st.integers(0, n), st.just(n))))
+def test_wilson_interval_contains_the_estimate(successes_and_n):
+    successes, n = successes_and_n
+    lo, hi = wilson_interval(successes, n)
+    assert 0.0 <= lo <= successes / n <= hi <= 1.0
 
 
 def _rows(successes_by_error, n=20):
@@ -84,3 +101,24 @@ def test_small_sweep_resumes_and_reports(tmp_path):
     assert paths["png"].stat().st_size > 10_000
     assert "tolerable error" in paths["md"].read_text()
     assert "Perception pose source" in paths["md"].read_text()
+
+
+def test_report_draws_when_every_episode_of_an_error_succeeds(tmp_path):
+    # `sms3d sweep --errors 0 --episodes 4 --chunk 4`: 4/4 successes drew a negative error bar.
+    paths = write_report(_rows({0.0: 4, 5.0: 3}, n=4), tmp_path)
+    assert paths["png"].stat().st_size > 10_000
+    assert "| 0° | 100.0 % | 51.0–100.0 % | 4 |" in paths["md"].read_text()
+
+
+def test_a_failed_report_leaves_no_earlier_report_behind(tmp_path, monkeypatch):
+    paths = write_report(_rows({0.0: 20}), tmp_path)
+    assert all(p.is_file() for p in paths.values())
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("plot failed")
+
+    monkeypatch.setattr(study_report, "plot_sweep", fail)
+    with pytest.raises(RuntimeError, match="plot failed"):
+        write_report(_rows({0.0: 10}), tmp_path)
+    assert not any(p.exists() for p in paths.values())
+    assert list(tmp_path.iterdir()) == []  # no temporary files either
