@@ -1,11 +1,15 @@
-"""Pick policies trained with stable-baselines3 (PPO or SAC) on ``SMS3DPick-v0``.
+"""Pick policies trained with stable-baselines3 (PPO or SAC) on ``SMS3DPick-v0`` or on the
+learnable options of ``SMS3DPickTrain-v0``.
 
 ``train_policy(TrainConfig(...))`` trains with vectorised envs (``SubprocVecEnv`` for
 ``n_envs > 1``), evaluates periodically (``eval/success_rate`` from the env's ``is_success``),
 writes CSV (and TensorBoard, if installed) logs, checkpoints and ``model.zip`` plus
-``config.json`` and ``summary.json`` into ``out``. ``evaluate_policy_success`` runs a saved
-model for seeded episodes and returns the success rate with a 95 % Wilson interval and the
-failure causes. ``register`` adds ``sms3d train-policy`` and ``sms3d eval-policy``.
+``config.json`` and ``summary.json`` into ``out``; ``normalize=True`` standardises observations
+(SB3's ``VecNormalize``, saved as ``vecnormalize.pkl`` beside the model). The demonstration-started
+recipe lives in :mod:`sms3d_env.imitation`. ``evaluate_policy_success`` runs a saved model (by
+default the shipped policy, ``SHIPPED_POLICY``) for seeded episodes under the env id and options
+it was trained with and returns the success rate with a 95 % Wilson interval and the failure
+causes. ``register`` adds ``sms3d train-policy`` and ``sms3d eval-policy``.
 """
 
 from __future__ import annotations
@@ -24,7 +28,12 @@ import numpy as np
 
 ALGOS = ("ppo", "sac")
 POSE_SOURCES = ("oracle", "noisy")
-REWARD_TYPES = ("dense", "sparse")
+REWARD_TYPES = ("dense", "sparse", "staged")
+ENV_IDS = ("SMS3DPick-v0", "SMS3DPickTrain-v0")
+RECIPES = ("rl", "bc")
+#: The shipped pick policy (``model.zip`` with its ``config.json``, ``README.md``, metrics).
+SHIPPED_POLICY = Path(__file__).parent / "weights" / "pick_policy" / "model.zip"
+VECNORM_FILE = "vecnormalize.pkl"
 
 
 def _tensorboard_available() -> bool:
@@ -45,7 +54,11 @@ class TrainConfig:
         max_wall_s: stop early (after the current step) once this many seconds have passed.
         n_envs: parallel envs (``SubprocVecEnv`` if > 1, else ``DummyVecEnv``).
         pose_source, pose_error_deg, position_noise: the target pose estimate used in training.
-        reward_type: ``"dense"`` or ``"sparse"``.
+        env_id: ``"SMS3DPick-v0"`` (its options as given here) or ``"SMS3DPickTrain-v0"`` (the
+            learnable options: latched suction, staged reward, dead-end episode end, task
+            observations; ``reward_type`` is then ignored and must stay at its default).
+        normalize: standardise observations with running statistics (``VecNormalize``).
+        reward_type: ``"dense"``, ``"sparse"`` or ``"staged"``.
         num_mushrooms: mushrooms per generated scene.
         max_episode_steps: episode limit (the registered env uses 250).
         eval_freq, checkpoint_freq: in total env steps; 0 disables.
@@ -58,6 +71,8 @@ class TrainConfig:
     """
 
     algo: str = "ppo"
+    env_id: str = "SMS3DPick-v0"
+    normalize: bool = False
     total_steps: int = 100_000
     max_wall_s: float | None = None
     n_envs: int = 1
@@ -93,6 +108,12 @@ class TrainConfig:
             raise bad("pose_source", f"must be one of {POSE_SOURCES}")
         if self.reward_type not in REWARD_TYPES:
             raise bad("reward_type", f"must be one of {REWARD_TYPES}")
+        if self.env_id not in ENV_IDS:
+            raise bad("env_id", f"must be one of {ENV_IDS}")
+        if self.env_id == "SMS3DPickTrain-v0" and self.reward_type != "dense":
+            raise bad("reward_type", "is set by SMS3DPickTrain-v0 (staged); leave it at its default")
+        if not isinstance(self.normalize, bool):
+            raise bad("normalize", "must be a bool")
         for name in ("total_steps", "n_envs", "torch_threads", "num_mushrooms", "max_episode_steps", "eval_episodes",
                      "batch_size", "n_steps", "buffer_size"):
             v = getattr(self, name)
@@ -121,9 +142,12 @@ class TrainConfig:
         object.__setattr__(self, "net_arch", tuple(int(h) for h in self.net_arch))
 
     def env_kwargs(self, pose_source: str | None = None, pose_error_deg: float | None = None) -> dict[str, Any]:
-        return env_kwargs(self.num_mushrooms, pose_source or self.pose_source,
-                          self.pose_error_deg if pose_error_deg is None else pose_error_deg,
-                          self.position_noise, self.reward_type, self.max_episode_steps)
+        kw = env_kwargs(self.num_mushrooms, pose_source or self.pose_source,
+                        self.pose_error_deg if pose_error_deg is None else pose_error_deg,
+                        self.position_noise, self.reward_type, self.max_episode_steps)
+        if self.env_id != "SMS3DPick-v0":
+            kw.pop("reward_type")  # the training id sets its own
+        return {"env_id": self.env_id, **kw}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
@@ -138,21 +162,23 @@ def env_kwargs(num_mushrooms: int, pose_source: str, pose_error_deg: float, posi
                reward_type: str = "dense", max_episode_steps: int = 250) -> dict[str, Any]:
     import generator
 
-    return {
+    kw = {
         "scene_config": generator.SceneConfig().replace(placement__num_mushrooms=int(num_mushrooms)),
-        "pose_source": pose_source, "pose_error_deg": float(pose_error_deg),
-        "position_noise": float(position_noise), "reward_type": reward_type,
+        "pose_source": pose_source, "reward_type": reward_type,
         "max_episode_steps": int(max_episode_steps),
     }
+    if pose_source == "noisy":  # the env refuses pose errors it would ignore
+        kw.update(pose_error_deg=float(pose_error_deg), position_noise=float(position_noise))
+    return kw
 
 
-def _make_env(**kwargs: Any) -> Any:
+def _make_env(env_id: str = "SMS3DPick-v0", **kwargs: Any) -> Any:
     """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it."""
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the env ids)
 
-    return gym.make("SMS3DPick-v0", **kwargs)
+    return gym.make(env_id, **kwargs)
 
 
 def _vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | None) -> Any:
@@ -163,6 +189,14 @@ def _vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | 
                         monitor_dir=monitor_dir,
                         vec_env_cls=SubprocVecEnv if n_envs > 1 else DummyVecEnv,
                         monitor_kwargs={"info_keywords": ("is_success", "failure_cause")})
+
+
+def _normalized(env: Any, training: bool) -> Any:
+    """Observations standardised by running statistics (rewards as they are: the staged reward
+    is bounded already, and evaluation reports true returns)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    return VecNormalize(env, norm_obs=True, norm_reward=False, training=training)
 
 
 def _build_model(cfg: TrainConfig, env: Any) -> Any:
@@ -222,6 +256,8 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(asdict(cfg), indent=2))
     env = _vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"))
+    if cfg.normalize:
+        env = _normalized(env, training=True)
     eval_env = None
     try:
         model = _build_model(cfg, env)
@@ -233,13 +269,17 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
         if cfg.eval_freq > 0:
             # Periodic evaluation under the training pose condition (fixed seeds).
             eval_env = _vec_env(cfg.env_kwargs(), 1, cfg.seed + 10_000, None)
+            if cfg.normalize:
+                # EvalCallback copies the training statistics into it before each evaluation.
+                eval_env = _normalized(eval_env, training=False)
             callbacks.append(EvalCallback(
                 eval_env, n_eval_episodes=cfg.eval_episodes, eval_freq=max(cfg.eval_freq // cfg.n_envs, 1),
                 log_path=str(out / "eval"), best_model_save_path=str(out / "best"),
                 deterministic=True, verbose=cfg.verbose, warn=False))
         if cfg.checkpoint_freq > 0:
             callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),
-                                                str(out / "checkpoints"), name_prefix=cfg.algo))
+                                                str(out / "checkpoints"), name_prefix=cfg.algo,
+                                                save_vecnormalize=cfg.normalize))
         if cfg.max_wall_s is not None:
             callbacks.append(_wall_clock_callback(cfg.max_wall_s))
         t0 = time.perf_counter()
@@ -247,6 +287,8 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
                     progress_bar=False)
         wall = time.perf_counter() - t0
         model.save(str(out / "model.zip"))
+        if cfg.normalize:
+            env.save(str(out / VECNORM_FILE))
         summary = {
             "algo": cfg.algo, "steps": int(model.num_timesteps), "wall_s": round(wall, 1),
             "steps_per_s": round(model.num_timesteps / wall, 1) if wall > 0 else math.nan,
@@ -280,57 +322,91 @@ def load_model(model_path: str | Path, algo: str | None = None) -> Any:
         return SAC.load(str(path), device="cpu")
 
 
-def evaluate_policy_success(model_path: str | Path, episodes: int = 30, pose_error_deg: float = 0.0,
-                            seed: int = 0, num_mushrooms: int | None = None,
+class PolicyActor:
+    """A saved SB3 model as ``actor(obs) -> action``, its observation statistics applied when a
+    ``vecnormalize.pkl`` lies beside it. ``env_id``/``env_options``: what it was trained on
+    (``config.json`` beside the model; ``SMS3DPick-v0`` with no options if there is none)."""
+
+    def __init__(self, model_path: str | Path, algo: str | None = None, deterministic: bool = True) -> None:
+        path = Path(model_path)
+        if not path.is_file():
+            raise FileNotFoundError(f"model not found: {path}")
+        self.path, self.deterministic = path, deterministic
+        self.saved: dict[str, Any] = {}
+        if (path.parent / "config.json").is_file():
+            self.saved = json.loads((path.parent / "config.json").read_text())
+        self.env_id = self.saved.get("env_id", "SMS3DPick-v0")
+        self.env_options = dict(self.saved.get("env_options", {}))
+        self.model = load_model(path, algo)
+        self.obs_stats = None
+        if (path.parent / VECNORM_FILE).is_file():
+            import pickle
+
+            with open(path.parent / VECNORM_FILE, "rb") as f:
+                self.obs_stats = pickle.load(f)  # SB3 VecNormalize, saved by train_policy
+
+    def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        if self.obs_stats is not None:
+            obs = self.obs_stats.normalize_obs(obs)
+        action, _ = self.model.predict(obs, deterministic=self.deterministic)
+        return action
+
+
+def evaluate_policy_success(model_path: str | Path | None = None, episodes: int = 30,
+                            pose_error_deg: float = 0.0, seed: int = 0,
+                            num_mushrooms: int | None = None,
                             max_episode_steps: int | None = None, algo: str | None = None,
-                            deterministic: bool = True) -> dict[str, Any]:
+                            deterministic: bool = True, progress: bool = False) -> dict[str, Any]:
     """Success of a saved policy over seeded episodes with oracle (0 deg) or noisy target poses.
 
-    Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for every model and
-    pose error. Scene size and episode limit come from the model's ``config.json`` unless given.
+    ``model_path`` None: the shipped policy. The env is the id and options the policy was trained
+    with (``config.json`` beside the model) on ``num_mushrooms``-mushroom beds (default 25, the
+    registered env's). Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for
+    every model and pose error.
 
     Returns ``{"episodes", "successes", "success_rate", "ci95": (lo, hi), "reachable",
     "success_rate_reachable", "failure_causes": {cause: count}, "target_detached_at_end",
-    "target_held_at_end" (episode counts), "mean_return", "mean_steps",
-    "pose_error_deg", "seed", "model"}``.
+    "target_held_at_end" (episode counts), "mean_return", "mean_steps", "per_episode" (success
+    per episode), "env_id", "env_options", "num_mushrooms", "pose_error_deg", "seed", "model"}``.
     """
+    from tqdm import tqdm
+
     from sms3d_env.study_report import wilson_interval
 
     if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
         raise ValueError(f"episodes must be an integer >= 1, got {episodes!r}")
     if not (math.isfinite(pose_error_deg) and pose_error_deg >= 0):
         raise ValueError(f"pose_error_deg must be a finite number >= 0, got {pose_error_deg!r}")
-    path = Path(model_path)
-    if not path.exists():
-        raise FileNotFoundError(f"model not found: {path}")
-    saved: dict[str, Any] = {}
-    if (path.parent / "config.json").exists():
-        saved = json.loads((path.parent / "config.json").read_text())
-    model = load_model(path, algo)
-    kw = env_kwargs(num_mushrooms or saved.get("num_mushrooms", 10),
-                    "noisy" if pose_error_deg > 0 else "oracle", pose_error_deg, 0.0,
-                    saved.get("reward_type", "dense"),
-                    max_episode_steps or saved.get("max_episode_steps", 250))
+    if num_mushrooms is not None and (isinstance(num_mushrooms, bool) or not isinstance(num_mushrooms, int)
+                                      or num_mushrooms < 1):
+        raise ValueError(f"num_mushrooms must be an integer >= 1, got {num_mushrooms!r}")
+    actor = PolicyActor(SHIPPED_POLICY if model_path is None else model_path, algo, deterministic)
+    kw = env_kwargs(num_mushrooms or 25, "noisy" if pose_error_deg > 0 else "oracle", pose_error_deg,
+                    0.0, actor.saved.get("reward_type", "dense"),
+                    max_episode_steps or actor.saved.get("max_episode_steps", 250))
+    if actor.env_id != "SMS3DPick-v0":
+        kw.pop("reward_type")
+    kw.update(actor.env_options)
     import torch
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # per-step inference of a small MLP: more threads only add overhead
-    env = _make_env(**kw)
+    env = _make_env(actor.env_id, **kw)
     causes: Counter[str] = Counter()
     successes = reachable = reach_succ = detached = held = 0
-    returns, lengths = [], []
+    returns, lengths, per_episode = [], [], []
     try:
-        for i in range(episodes):
+        for i in tqdm(range(episodes), desc="eval-policy", disable=not progress, unit="ep"):
             obs, info = env.reset(seed=seed + i)
             done, total, steps = False, 0.0, 0
             while not done:
-                action, _ = model.predict(obs, deterministic=deterministic)
-                obs, reward, terminated, truncated, info = env.step(action)
+                obs, reward, terminated, truncated, info = env.step(actor(obs))
                 total += float(reward)
                 steps += 1
                 done = terminated or truncated
             ok = bool(info["is_success"])
             successes += ok
+            per_episode.append(ok)
             reachable += bool(info["reachable"])
             reach_succ += ok and bool(info["reachable"])
             detached += bool(info["target_detached"])
@@ -344,20 +420,33 @@ def evaluate_policy_success(model_path: str | Path, episodes: int = 30, pose_err
         torch.set_num_threads(threads)
     lo, hi = wilson_interval(successes, episodes)
     return {
-        "model": str(path), "episodes": episodes, "successes": successes,
+        "model": str(actor.path), "episodes": episodes, "successes": successes,
         "success_rate": successes / episodes, "ci95": (lo, hi), "reachable": reachable,
         "success_rate_reachable": reach_succ / reachable if reachable else math.nan,
         "failure_causes": dict(sorted(causes.items())),
         "target_detached_at_end": detached, "target_held_at_end": held, "mean_return": float(np.mean(returns)),
-        "mean_steps": float(np.mean(lengths)), "pose_error_deg": float(pose_error_deg), "seed": seed,
+        "mean_steps": float(np.mean(lengths)), "per_episode": per_episode, "env_id": actor.env_id,
+        "env_options": actor.env_options, "num_mushrooms": num_mushrooms or 25,
+        "pose_error_deg": float(pose_error_deg), "seed": seed,
     }
+
+
+def success_line(res: dict[str, Any]) -> str:
+    """``success K/N (P %, 95 % CI lo-hi %); failures: cause n, ...`` of an evaluation result."""
+    lo, hi = res["ci95"]
+    causes = ", ".join(f"{c} {n}" for c, n in res["failure_causes"].items()) or "none"
+    return (f"success {res['successes']}/{res['episodes']} ({100 * res['success_rate']:.1f} %, "
+            f"95 % CI {100 * lo:.1f}-{100 * hi:.1f} %); failures: {causes}")
 
 
 # ---------------------------------------------------------------------------------- CLI
 def _cmd_train(args: Any) -> int:
+    if args.recipe == "bc":
+        return _cmd_train_bc(args)
     pose_source = args.pose_source or ("noisy" if args.pose_error_deg > 0 else "oracle")
     try:
-        cfg = TrainConfig(algo=args.algo, total_steps=args.steps, max_wall_s=args.max_wall_s,
+        cfg = TrainConfig(algo=args.algo, env_id=args.env_id, normalize=args.normalize,
+                          total_steps=args.steps, max_wall_s=args.max_wall_s,
                           n_envs=args.n_envs, pose_source=pose_source, pose_error_deg=args.pose_error_deg,
                           reward_type=args.reward_type, num_mushrooms=args.num_mushrooms, seed=args.seed,
                           out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
@@ -370,46 +459,78 @@ def _cmd_train(args: Any) -> int:
     return 0
 
 
+def _cmd_train_bc(args: Any) -> int:
+    from sms3d_env.imitation import BCConfig, train_bc
+
+    try:
+        cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
+                       pose_error_deg=args.pose_error_deg, seed=args.seed, out=args.out,
+                       num_mushrooms=tuple(args.demo_mushrooms))
+    except ValueError as e:
+        print(f"error: {e}")
+        return 2
+    print(json.dumps(train_bc(cfg), indent=2))
+    return 0
+
+
 def _cmd_eval(args: Any) -> int:
     try:
         res = evaluate_policy_success(args.model, episodes=args.episodes, pose_error_deg=args.pose_error_deg,
-                                      seed=args.seed, num_mushrooms=args.num_mushrooms)
+                                      seed=args.seed, num_mushrooms=args.num_mushrooms, progress=True)
     except (ValueError, FileNotFoundError) as e:
         print(f"error: {e}")
         return 2
-    text = json.dumps(res, indent=2)
+    text = json.dumps({k: v for k, v in res.items() if k != "per_episode"}, indent=2)
     print(text)
+    print(success_line(res))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(text)
+        Path(args.json).write_text(json.dumps(res, indent=2))
     return 0
 
 
 def register(subparsers: Any) -> None:
     """Add ``sms3d train-policy`` and ``sms3d eval-policy``."""
-    p = subparsers.add_parser("train-policy", help="train a PPO/SAC pick policy (stable-baselines3)")
-    p.add_argument("--algo", choices=ALGOS, default="ppo")
-    p.add_argument("--steps", type=int, default=100_000, help="total env steps (default 100000)")
+    defaults = TrainConfig()
+    p = subparsers.add_parser(
+        "train-policy", help="train a pick policy: RL (PPO/SAC, stable-baselines3) or behaviour "
+                             "cloning of the scripted picker (--recipe bc)")
+    p.add_argument("--recipe", choices=RECIPES, default="rl",
+                   help="rl: PPO/SAC from scratch (default); bc: scripted demonstrations -> "
+                        "behaviour cloning on SMS3DPickTrain-v0 (sms3d_env.imitation)")
+    p.add_argument("--algo", choices=ALGOS, default=defaults.algo)
+    p.add_argument("--env-id", choices=ENV_IDS, default=defaults.env_id,
+                   help="SMS3DPickTrain-v0: the learnable options (latched suction, staged reward, ...)")
+    p.add_argument("--normalize", action="store_true", help="standardise observations (VecNormalize)")
+    p.add_argument("--steps", type=int, default=defaults.total_steps, help="total env steps")
     p.add_argument("--max-wall-s", type=float, default=None, help="stop after this many seconds")
-    p.add_argument("--n-envs", type=int, default=1, help="parallel envs (SubprocVecEnv if > 1)")
+    p.add_argument("--n-envs", type=int, default=defaults.n_envs, help="parallel envs (SubprocVecEnv if > 1)")
     p.add_argument("--pose-source", choices=POSE_SOURCES, default=None,
                    help="default: noisy if --pose-error-deg > 0, else oracle")
     p.add_argument("--pose-error-deg", type=float, default=0.0)
-    p.add_argument("--reward-type", choices=REWARD_TYPES, default="dense")
-    p.add_argument("--out", default="runs/policy", help="run folder (model.zip, progress.csv, ...)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--num-mushrooms", type=int, default=10)
-    p.add_argument("--eval-episodes", type=int, default=10, help="episodes per periodic evaluation")
-    p.add_argument("--eval-freq", type=int, default=20_000, help="env steps between evaluations (0: none)")
-    p.add_argument("--checkpoint-freq", type=int, default=50_000, help="env steps between checkpoints (0: none)")
+    p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)
+    p.add_argument("--out", default=defaults.out, help="run folder (model.zip, progress.csv, ...)")
+    p.add_argument("--seed", type=int, default=defaults.seed)
+    p.add_argument("--num-mushrooms", type=int, default=defaults.num_mushrooms)
+    p.add_argument("--eval-episodes", type=int, default=defaults.eval_episodes,
+                   help="episodes per periodic evaluation")
+    p.add_argument("--eval-freq", type=int, default=defaults.eval_freq, help="env steps between evaluations (0: none)")
+    p.add_argument("--checkpoint-freq", type=int, default=defaults.checkpoint_freq,
+                   help="env steps between checkpoints (0: none)")
+    bc = p.add_argument_group("behaviour cloning (--recipe bc)")
+    bc.add_argument("--demo-episodes", type=int, default=400, help="scripted episodes (failures dropped)")
+    bc.add_argument("--demo-mushrooms", type=int, nargs="+", default=[10, 25], help="bed sizes cycled through")
+    bc.add_argument("--action-noise", type=float, default=0.2, help="DART noise on the twist while collecting")
+    bc.add_argument("--epochs", type=int, default=40)
     p.set_defaults(func=_cmd_train)
 
-    e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy")
-    e.add_argument("--model", required=True, help="path to model.zip")
+    e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "
+                                                  "(default: the shipped one)")
+    e.add_argument("--model", default=None, help="path to model.zip (default: the shipped policy)")
     e.add_argument("--episodes", "--eval-episodes", dest="episodes", type=int, default=30)
     e.add_argument("--pose-error-deg", type=float, default=0.0, help="0: oracle poses")
     e.add_argument("--seed", type=int, default=1_000_000, help="first episode seed")
-    e.add_argument("--num-mushrooms", type=int, default=None, help="default: the training value")
+    e.add_argument("--num-mushrooms", type=int, default=None, help="mushrooms per bed (default 25)")
     e.add_argument("--json", default=None, help="also write the result here")
     e.set_defaults(func=_cmd_eval)
 

@@ -1,0 +1,276 @@
+"""Demonstration-started pick policies: scripted-picker rollouts, then behaviour cloning of a
+stable-baselines3 policy (PPO's ``MultiInputPolicy``, so that ``PPO.load`` and RL fine-tuning
+take it as it is).
+
+Demonstrations are collected DART-style (Laskey et al. 2017, "DART: Noise Injection for Robust
+Imitation Learning"): the scripted picker acts with Gaussian noise added to its twist command and
+every visited state is labelled with the picker's *clean* action, so the clone sees (and learns to
+correct) states a little off the picker's own path. Only successful episodes are kept.
+
+``train_bc(BCConfig(...))`` writes into ``out``: ``demos.npz`` (reused on a re-run with the same
+demonstration settings), ``model.zip``, ``config.json`` (the env id and options the policy needs)
+and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+TRAIN_ENV_ID = "SMS3DPickTrain-v0"
+
+
+@dataclass(frozen=True)
+class BCConfig:
+    """Demonstration collection and behaviour cloning settings.
+
+    Args:
+        episodes: scripted episodes to run (failures are dropped), split evenly over
+            ``num_mushrooms`` bed sizes; episode ``i`` uses ``reset(seed=seed + i)``.
+        num_mushrooms: bed sizes the demonstrations cycle through.
+        action_noise: standard deviation of the Gaussian noise on the six normalised twist
+            commands while collecting (DART); the suction command is left clean.
+        pose_error_deg: the noisy pose source's rotation error while collecting (0: oracle).
+        epochs, batch_size, learning_rate, net_arch: the regression of the policy's mean action
+            onto the picker's clean actions (mean squared error, Adam).
+        log_std: the Gaussian policy's log standard deviation after cloning (exploration of an
+            RL fine-tuning; deterministic evaluation uses the mean).
+    """
+
+    episodes: int = 400
+    num_mushrooms: tuple[int, ...] = (10, 25)
+    action_noise: float = 0.2
+    pose_error_deg: float = 0.0
+    epochs: int = 40
+    batch_size: int = 512
+    learning_rate: float = 1e-3
+    net_arch: tuple[int, ...] = (256, 256)
+    log_std: float = -2.0
+    seed: int = 0
+    out: str = "runs/bc"
+    torch_threads: int = 1
+
+    def __post_init__(self) -> None:
+        def bad(name: str, why: str) -> ValueError:
+            return ValueError(f"BCConfig.{name} {why}, got {getattr(self, name)!r}")
+
+        for name in ("episodes", "epochs", "batch_size", "torch_threads"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise bad(name, "must be an integer >= 1")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise bad("seed", "must be an integer >= 0")
+        object.__setattr__(self, "num_mushrooms", tuple(self.num_mushrooms))
+        object.__setattr__(self, "net_arch", tuple(self.net_arch))
+        if not self.num_mushrooms or any(isinstance(n, bool) or not isinstance(n, int) or n < 1
+                                         for n in self.num_mushrooms):
+            raise bad("num_mushrooms", "must be a non-empty sequence of integers >= 1")
+        if not self.net_arch or any(isinstance(h, bool) or not isinstance(h, int) or h < 1
+                                    for h in self.net_arch):
+            raise bad("net_arch", "must be a non-empty sequence of integers >= 1")
+        for name in ("action_noise", "pose_error_deg"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+                raise bad(name, "must be a finite number >= 0")
+        if not (isinstance(self.learning_rate, (int, float)) and 0 < self.learning_rate < 1):
+            raise bad("learning_rate", "must be in (0, 1)")
+        if not (isinstance(self.log_std, (int, float)) and math.isfinite(self.log_std)):
+            raise bad("log_std", "must be a finite number")
+        if not self.out:
+            raise bad("out", "must be a non-empty path")
+
+    def demo_settings(self) -> dict[str, Any]:
+        """What the demonstrations depend on (a saved ``demos.npz`` is reused only if equal)."""
+        return {"episodes": self.episodes, "num_mushrooms": list(self.num_mushrooms),
+                "action_noise": self.action_noise, "pose_error_deg": self.pose_error_deg,
+                "seed": self.seed, "env_id": TRAIN_ENV_ID}
+
+
+def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0) -> dict[str, Any]:
+    """``gym.make(TRAIN_ENV_ID, **kwargs)`` arguments for a bed size and pose error."""
+    import generator
+
+    kw: dict[str, Any] = {"scene_config": generator.SceneConfig().replace(
+        placement__num_mushrooms=int(num_mushrooms))}
+    if pose_error_deg > 0:
+        kw.update(pose_source="noisy", pose_error_deg=float(pose_error_deg))
+    return kw
+
+
+def collect_demonstrations(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
+    """Run the scripted picker (with DART noise) and return its successful episodes' steps:
+    one array per observation key (steps, n), ``actions`` (steps, 7) and ``episode`` (steps,)."""
+    import gymnasium as gym
+    from tqdm import tqdm
+
+    import sms3d_env  # noqa: F401  (registers the env ids)
+    from sms3d_env.scripted_picker import ScriptedPicker
+
+    envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg)) for n in cfg.num_mushrooms]
+    rng = np.random.default_rng(cfg.seed)
+    obs_rows: dict[str, list[np.ndarray]] = {}
+    actions: list[np.ndarray] = []
+    episode: list[int] = []
+    kept = 0
+    bar = tqdm(range(cfg.episodes), desc="demonstrations", disable=not progress, unit="ep")
+    try:
+        for i in bar:
+            env = envs[i % len(envs)]
+            picker = ScriptedPicker.for_env(env)
+            obs, _ = env.reset(seed=cfg.seed + i)
+            ep_obs, ep_act = [], []
+            done = False
+            while not done:
+                clean = picker(obs)
+                noisy = clean.copy()
+                noisy[:6] += rng.normal(0.0, cfg.action_noise, 6).astype(np.float32)
+                ep_obs.append(obs)
+                ep_act.append(clean)
+                obs, _, terminated, truncated, info = env.step(np.clip(noisy, -1, 1))
+                done = terminated or truncated
+            if info["is_success"]:
+                kept += 1
+                for o in ep_obs:
+                    for k, v in o.items():
+                        obs_rows.setdefault(k, []).append(np.asarray(v, np.float32))
+                actions += ep_act
+                episode += [i] * len(ep_act)
+            bar.set_postfix(kept=kept)
+    finally:
+        for env in envs:
+            env.close()
+    if not actions:
+        raise RuntimeError("no demonstration succeeded: nothing to clone (check the env options)")
+    out = {k: np.stack(v) for k, v in obs_rows.items()}
+    out["actions"] = np.stack(actions).astype(np.float32)
+    out["episode"] = np.asarray(episode, np.int64)
+    return out
+
+
+def _save_npz_atomic(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays)
+    os.replace(tmp, path)
+
+
+def load_or_collect(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
+    """``out/demos.npz`` if it was made with the same demonstration settings, else collected anew."""
+    path = Path(cfg.out) / "demos.npz"
+    if path.exists():
+        try:
+            with np.load(path) as z:
+                if json.loads(str(z["__meta__"])) == cfg.demo_settings():
+                    return {k: z[k] for k in z.files if k != "__meta__"}
+        except (OSError, ValueError, KeyError):
+            pass  # unreadable or from an interrupted write: collect again
+    demos = collect_demonstrations(cfg, progress)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _save_npz_atomic(path, demos, cfg.demo_settings())
+    return demos
+
+
+def flat_observations(demos: dict[str, np.ndarray], keys: list[str]) -> np.ndarray:
+    return np.concatenate([demos[k].reshape(len(demos[k]), -1) for k in keys], axis=1)
+
+
+def build_policy_model(env: Any, demos: dict[str, np.ndarray], net_arch: tuple[int, ...],
+                       log_std: float, seed: int) -> Any:
+    """A PPO model whose policy standardises observations with the demonstrations' statistics."""
+    from stable_baselines3 import PPO
+
+    from sms3d_env.policy_features import NormalizedFlatten
+
+    keys = list(env.observation_space.spaces)
+    x = flat_observations(demos, keys)
+    # Constant entries (e.g. a zero wrist torque component) keep unit scale.
+    std = np.where(x.std(0) > 1e-6, x.std(0), 1.0)
+    policy_kwargs = {"net_arch": list(net_arch), "log_std_init": float(log_std),
+                     "features_extractor_class": NormalizedFlatten,
+                     "features_extractor_kwargs": {"mean": x.mean(0).tolist(), "std": std.tolist()}}
+    return PPO("MultiInputPolicy", env, policy_kwargs=policy_kwargs, seed=seed, device="cpu",
+               verbose=0)
+
+
+def behaviour_clone(model: Any, demos: dict[str, np.ndarray], epochs: int, batch_size: int,
+                    learning_rate: float, seed: int, progress: bool = True) -> list[float]:
+    """Regress the policy's mean action onto the demonstrations' actions; returns the loss per
+    epoch. Trains the shared features, the policy network and the action head (not the value)."""
+    import torch as th
+    from tqdm import tqdm
+
+    policy = model.policy
+    keys = list(model.observation_space.spaces)
+    obs = {k: th.as_tensor(demos[k]) for k in keys}
+    target = th.as_tensor(demos["actions"])
+    n = len(target)
+    params = [p for name, p in policy.named_parameters()
+              if not name.startswith(("value_net", "mlp_extractor.value_net", "log_std"))]
+    opt = th.optim.Adam(params, lr=learning_rate)
+    sched = th.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=epochs)
+    gen = th.Generator().manual_seed(seed)
+    losses = []
+    policy.train()
+    for _ in tqdm(range(epochs), desc="behaviour cloning", disable=not progress, unit="epoch"):
+        order = th.randperm(n, generator=gen)
+        total = 0.0
+        for start in range(0, n, batch_size):
+            idx = order[start:start + batch_size]
+            features = policy.extract_features({k: v[idx] for k, v in obs.items()})
+            latent_pi = policy.mlp_extractor.forward_actor(features)
+            mean = policy.action_net(latent_pi)
+            loss = th.nn.functional.mse_loss(mean, target[idx])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * len(idx)
+        sched.step()
+        losses.append(total / n)
+    policy.eval()
+    return losses
+
+
+def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
+    """Collect (or reuse) demonstrations, clone them, save ``model.zip`` + ``config.json`` +
+    ``summary.json`` in ``cfg.out``; returns the summary."""
+    import gymnasium as gym
+    import torch
+
+    import sms3d_env
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(cfg.torch_threads)
+    try:
+        t0 = time.perf_counter()
+        demos = load_or_collect(cfg, progress)
+        t_demo = time.perf_counter() - t0
+        env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(cfg.num_mushrooms[0]))
+        try:
+            model = build_policy_model(env, demos, cfg.net_arch, cfg.log_std, cfg.seed)
+        finally:
+            env.close()
+        losses = behaviour_clone(model, demos, cfg.epochs, cfg.batch_size, cfg.learning_rate,
+                                 cfg.seed, progress)
+        wall = time.perf_counter() - t0
+    finally:
+        torch.set_num_threads(threads)
+    model.save(str(out / "model.zip"))
+    config = {"recipe": "bc", "algo": "ppo", "env_id": TRAIN_ENV_ID,
+              "env_options": dict(sms3d_env.TRAIN_OPTIONS), "max_episode_steps": 250,
+              **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
+    (out / "config.json").write_text(json.dumps(config, indent=2))
+    summary = {"recipe": "bc", "demo_episodes": cfg.episodes,
+               "demo_episodes_kept": int(len(np.unique(demos["episode"]))),
+               "demo_steps": int(len(demos["actions"])), "final_loss": losses[-1],
+               "demo_wall_s": round(t_demo, 1), "wall_s": round(wall, 1),
+               "model": str(out / "model.zip")}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary

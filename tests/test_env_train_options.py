@@ -1,0 +1,245 @@
+"""The training options of SMS3DPickEnv (SMS3DPickTrain-v0): latched suction, the staged reward,
+dead-end episode ends, observations in the estimated target frame, the wrist F/T, argument checks."""
+
+import math
+import warnings
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import generator
+import sms3d_env
+from sms3d_env import OraclePose, ScriptedPicker
+from sms3d_env.rewards import RewardState, reward_terms
+from sms3d_env.task_obs import target_frame, tool_in_target, twist_about
+
+SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
+BED = generator.SceneConfig().replace(placement__num_mushrooms=25)
+
+
+def _run_until_sealed(env, seed=0):
+    picker = ScriptedPicker.for_env(env)
+    obs, _ = env.reset(seed=seed)
+    for _ in range(250):
+        obs, *_ = env.step(picker(obs))
+        if obs["suction"][1] > 0.5:
+            return obs
+    raise AssertionError("the scripted picker never sealed")
+
+
+@pytest.mark.parametrize("mode, kept", [("latched", True), ("momentary", False)])
+def test_latched_suction_keeps_the_seal_through_off_commands(mode, kept):
+    env = gym.make("SMS3DPick-v0", scene_config=SMALL, suction_mode=mode)
+    _run_until_sealed(env)
+    off = np.zeros(7, np.float32)
+    off[6] = -1.0
+    for _ in range(5):
+        obs, *_ = env.step(off)
+    assert bool(obs["suction"][1] > 0.5) is kept
+    assert bool(obs["suction"][0] > 0.5) is kept  # the valve state is observed
+
+
+def test_training_id_sets_the_options_and_passes_check_env():
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    u = env.unwrapped
+    assert (u.reward_type, u.suction_mode, u.end_on_dead_end, u.task_obs) == ("staged", "latched", True, True)
+    assert sms3d_env.TRAIN_OPTIONS["reward_type"] == "staged"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(u, skip_render_check=True)
+    unexpected = [str(w.message) for w in caught if "infinity" not in str(w.message)]
+    assert not unexpected, unexpected
+
+
+def _reward_state(**kw):
+    base = dict(tool_pos=np.zeros(3), tool_axis=np.array([0.0, 0.0, -1.0]),
+                est_cap_top=np.array([0.0, 0.0, -0.05]), est_axis=np.array([0.0, 0.0, 1.0]),
+                gripped_target=False, target_detached=False, lift=0.0, lift_goal=0.03,
+                success=False, bruised=False, root_utilisation=0.0, steps_left=100)
+    base.update(kw)
+    return RewardState(**base)
+
+
+@settings(max_examples=300, deadline=None)
+@given(dist=st.floats(0, 0.5), tilt=st.floats(0, math.pi), held=st.booleans(), detached=st.booleans(),
+       lift=st.floats(-0.1, 0.2), load=st.floats(0, 5), bruised=st.booleans(), left=st.integers(0, 250))
+def test_staged_reward_is_bounded_and_maximal_at_success(dist, tilt, held, detached, lift, load, bruised, left):
+    axis = np.array([0.0, math.sin(tilt), -math.cos(tilt)])
+    s = _reward_state(tool_pos=np.array([dist, 0.0, -0.05]), tool_axis=axis, gripped_target=held,
+                      target_detached=detached, lift=lift, root_utilisation=load, bruised=bruised,
+                      steps_left=left)
+    terms = reward_terms(s)
+    per_step = terms["stage"] + terms["progress"]
+    assert 0.0 <= per_step < 1.0
+    assert terms["success_bonus"] == 0.0
+    success = reward_terms(_reward_state(success=True, steps_left=left))
+    assert success["stage"] + success["progress"] == 1.0
+    # Finishing now is worth at least staying at any lower stage until the time limit.
+    assert sum(success.values()) >= per_step * (left + 1)
+
+
+def test_staged_reward_orders_the_stages():
+    far = sum(reward_terms(_reward_state(tool_pos=np.array([0.2, 0.0, 0.1]))).values())
+    near = sum(reward_terms(_reward_state(tool_pos=np.array([0.0, 0.0, -0.045]))).values())
+    sealed = sum(reward_terms(_reward_state(gripped_target=True)).values())
+    loaded = sum(reward_terms(_reward_state(gripped_target=True, root_utilisation=0.8)).values())
+    detached = sum(reward_terms(_reward_state(gripped_target=True, target_detached=True)).values())
+    lifted = sum(reward_terms(_reward_state(gripped_target=True, target_detached=True, lift=0.02)).values())
+    assert far < near < sealed < loaded < detached < lifted < 1.0
+    knocked_off = reward_terms(_reward_state(target_detached=True, tool_pos=np.array([0.2, 0.0, 0.1])))
+    assert sum(knocked_off.values()) == far  # detachment alone pays nothing
+
+
+def test_scripted_success_is_reported_with_reward_terms():
+    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    picker = ScriptedPicker.for_env(env)
+    obs, _ = env.reset(seed=1)
+    done, rewards = False, []
+    while not done:
+        obs, r, terminated, truncated, info = env.step(picker(obs))
+        rewards.append(r)
+        done = terminated or truncated
+    assert info["is_success"] and terminated
+    assert info["reward_stage"] == 1.0
+    assert info["reward_success_bonus"] == 250 - len(rewards)
+    assert max(rewards[:-1]) < 1.0 and rewards[-1] == 1.0 + info["reward_success_bonus"]
+
+
+def _nearest_neighbour_pose(scene, i, rng):
+    """The oracle pose of the target's nearest neighbour: the picker seals on the wrong cap."""
+    base = np.array([inst.position for inst in scene.instances])
+    d = np.linalg.norm(base - base[i], axis=1)
+    d[i] = np.inf
+    return OraclePose()(scene, int(np.argmin(d)), rng)
+
+
+@pytest.mark.parametrize("dead_end", [True, False])
+def test_a_latched_seal_on_a_neighbour_ends_the_episode(dead_end):
+    env = gym.make("SMS3DPick-v0", scene_config=BED, pose_source=_nearest_neighbour_pose,
+                   suction_mode="latched", end_on_dead_end=dead_end)
+    picker = ScriptedPicker.for_env(env)
+    obs, info = env.reset(seed=1)
+    u = env.unwrapped
+    target, steps, terminated = info["target"], 0, False
+    while not terminated and steps < 250:
+        obs, _, terminated, truncated, info = env.step(picker(obs))
+        steps += 1
+        if obs["suction"][1] > 0.5:
+            break
+    assert obs["suction"][1] > 0.5 and not info["gripped_target"]  # sealed, on another mushroom
+    assert terminated is dead_end and not info["is_success"]
+    assert u.failure_cause() == "no_seal"
+    assert target == info["target"]
+
+
+def test_target_frame_entries_for_a_known_pose():
+    axis = np.array([0.3, -0.2, 0.9])
+    axis /= np.linalg.norm(axis)
+    r = target_frame(axis)
+    np.testing.assert_allclose(r.T @ r, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(r[:, 2], axis)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+    cap = np.array([0.1, 0.2, 0.05])
+    # Tool 3 cm up the stem axis, facing down it: offset (0, 0, 0.03), axis (0, 0, -1), angle 0.
+    v = tool_in_target(cap + 0.03 * axis, -axis, cap, axis)
+    np.testing.assert_allclose(v, [0, 0, 0.03, 0, 0, -1, 0], atol=1e-7)
+    # Tilted by 20 degrees about the frame's x axis: the angle reads 20 degrees.
+    rot = np.eye(3)
+    mujoco.mju_axisAngle2Quat(q := np.zeros(4), r[:, 0], np.deg2rad(20))
+    mujoco.mju_quat2Mat(m9 := np.zeros(9), q)
+    rot = m9.reshape(3, 3)
+    assert tool_in_target(cap, rot @ -axis, cap, axis)[6] == pytest.approx(np.deg2rad(20))
+    x0 = r[:, 0]
+    assert twist_about(axis, x0, rot @ x0) == pytest.approx(0.0, abs=1e-9)  # about x: no twist
+    mujoco.mju_axisAngle2Quat(q, axis, 0.5)
+    mujoco.mju_quat2Mat(m9, q)
+    assert twist_about(axis, x0, m9.reshape(3, 3) @ x0) == pytest.approx(0.5)
+
+
+def test_task_observation_matches_the_tool_and_estimate():
+    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    obs, _ = env.reset(seed=3)
+    for _ in range(4):
+        obs, *_ = env.step(env.action_space.sample() * 0.3)
+    u = env.unwrapped
+    quat = obs["tool_pose"][3:]
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, quat)
+    expected = tool_in_target(obs["tool_pose"][:3], mat.reshape(3, 3)[:, 2],
+                              obs["target_pose"][:3], obs["target_pose"][3:])
+    np.testing.assert_allclose(obs["tool_in_target"], expected, atol=1e-6)
+    np.testing.assert_allclose(obs["progress"], [4 * u.control_dt, 0.0, 0.0])
+
+
+def test_wrist_sensor_reads_the_tool_weight_at_rest():
+    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    obs, _ = env.reset(seed=0)
+    for _ in range(10):
+        obs, *_ = env.step(np.zeros(7, np.float32))
+    m = env.unwrapped.model
+    tool = m.body("jaco/tool").id
+    weight = m.body_subtreemass[tool] * 9.81
+    assert np.linalg.norm(obs["wrist_wrench"][:3]) == pytest.approx(weight, rel=0.05)
+
+
+def test_step_after_the_end_warns_and_stays_terminated():
+    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL).unwrapped  # no TimeLimit/order wrapper
+    picker = ScriptedPicker.for_env(env)
+    obs, _ = env.reset(seed=1)
+    terminated = False
+    while not terminated:
+        obs, _, terminated, _, _ = env.step(picker(obs))
+    with pytest.warns(UserWarning, match="after the episode ended"):
+        _, _, terminated, _, _ = env.step(np.zeros(7, np.float32))
+    assert terminated
+
+
+BAD_ARGS = [
+    ({"pose_source": "oracle", "pose_error_deg": 10.0}, "pose_error_deg"),
+    ({"pose_source": "oracle", "position_noise": 0.01}, "position_noise"),
+    ({"target_rule": "nonsense"}, "target_rule"),
+    ({"image_size": (0, 0)}, "image_size"),
+    ({"image_size": (-4, 64)}, "image_size"),
+    ({"render_size": (480,)}, "render_size"),
+    ({"max_tilt_deg": float("nan")}, "max_tilt_deg"),
+    ({"free_radius": -1.0}, "free_radius"),
+    ({"scene_config": "foo"}, "scene_config"),
+    ({"suction_mode": "sticky"}, "suction_mode"),
+    ({"tool": "hand", "suction_mode": "latched"}, "suction_mode"),
+    ({"horizon": 0}, "horizon"),
+]
+
+
+@pytest.mark.parametrize("kwargs, field", BAD_ARGS)
+def test_env_refuses_arguments_it_would_ignore_or_misread(kwargs, field):
+    with pytest.raises((ValueError, TypeError), match=field):
+        sms3d_env.SMS3DPickEnv(**kwargs)
+
+
+_NON_FINITE_OR_NEGATIVE = st.one_of(st.floats(allow_nan=True, allow_infinity=True).filter(
+    lambda v: not (math.isfinite(v) and v >= 0)), st.booleans(), st.text(max_size=3))
+
+
+@settings(max_examples=60, deadline=None)
+@given(field=st.sampled_from(["pose_error_deg", "position_noise", "max_tilt_deg", "free_radius"]),
+       value=_NON_FINITE_OR_NEGATIVE)
+def test_env_numeric_arguments_property(field, value):
+    kwargs = {"pose_source": "noisy", field: value}
+    with pytest.raises((ValueError, TypeError), match=field):
+        sms3d_env.SMS3DPickEnv(**kwargs)
+
+
+@settings(max_examples=40, deadline=None)
+@given(size=st.one_of(st.tuples(st.integers(-5, 0), st.integers(-5, 64)),
+                      st.tuples(st.floats(1, 64), st.floats(1, 64)),
+                      st.lists(st.integers(1, 64), min_size=0, max_size=1).map(tuple),
+                      st.lists(st.integers(1, 64), min_size=3, max_size=4).map(tuple)))
+def test_env_image_size_property(size):
+    with pytest.raises(ValueError, match="image_size"):
+        sms3d_env.SMS3DPickEnv(image_size=size)
