@@ -4,11 +4,13 @@ from __future__ import annotations
 
 
 class ConfigError(ValueError):
-    """An invalid configuration value; ``field`` names the offending field."""
+    """An invalid configuration value; ``field`` names the offending field, ``message`` says
+    what is wrong with it (a command line can report it by the flag that set the field)."""
 
     def __init__(self, field: str, message: str) -> None:
         super().__init__(f"{field}: {message}")
         self.field = field
+        self.message = message
 
 
 class MeshError(ValueError):

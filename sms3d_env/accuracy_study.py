@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from generator.dataset.errors import CorruptFileError
+from generator.errors import ConfigError
 from generator.files import write_atomic
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.study_report import write_report
@@ -53,18 +55,22 @@ class SweepConfig:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        """Raise :class:`~generator.errors.ConfigError` naming the field. Everything is checked
+        here, before ``run_sweep`` creates the folder and records the settings in it, so that a
+        refused request leaves nothing behind to block the corrected one."""
+        from generator.config import SceneConfig
+
         object.__setattr__(self, "errors_deg", tuple(float(e) for e in self.errors_deg))
         if not self.errors_deg or any(not math.isfinite(e) or not 0 <= e <= 180 for e in self.errors_deg):
-            raise ValueError(f"errors_deg must be angles in [0, 180], got {self.errors_deg!r}")
-        if not isinstance(self.episodes, int) or self.episodes < 1:
-            raise ValueError(f"episodes must be an integer >= 1, got {self.episodes!r}")
-        if not isinstance(self.perception_episodes, int) or self.perception_episodes < 0:
-            raise ValueError(f"perception_episodes must be an integer >= 0, got {self.perception_episodes!r}")
-        if not isinstance(self.chunk, int) or self.chunk < 1:
-            raise ValueError(f"chunk must be an integer >= 1, got {self.chunk!r}")
+            raise ConfigError("errors_deg", f"must be angles in [0, 180] degrees, got {self.errors_deg!r}")
+        for name, least in (("episodes", 1), ("chunk", 1), ("perception_episodes", 0), ("seed", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise ConfigError(name, f"must be an integer >= {least}, got {value!r}")
         unknown = [v for v in self.variants if v not in SENSITIVITY_VARIANTS]
         if unknown:
-            raise ValueError(f"unknown physics variants {unknown}; choose from {sorted(SENSITIVITY_VARIANTS)}")
+            raise ConfigError("variants", f"unknown physics variants {unknown}; choose from {sorted(SENSITIVITY_VARIANTS)}")
+        SceneConfig().replace(placement__num_mushrooms=self.num_mushrooms)  # the generator's own range
 
 
 @dataclass(frozen=True)
@@ -175,10 +181,20 @@ def _settings(config: SweepConfig) -> dict[str, Any]:
     return json.loads(json.dumps({**dataclasses.asdict(config), "pose_weights_sha256": digest}, default=str))
 
 
+def _read_json(path: Path, remedy: str) -> Any:
+    """``path``'s JSON, or :class:`CorruptFileError` naming the file (truncated, not text)."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError
+        raise CorruptFileError(path, f"not readable JSON ({exc}); {remedy}") from exc
+
+
 def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
-    if not path.is_file():
+    # Only parts could be reused with the wrong settings: a folder without any (its sweep
+    # stopped before a task finished) takes the new settings.
+    if not path.is_file() or not any(path.parent.glob("parts/*.json")):
         return
-    stored = json.loads(path.read_text(encoding="utf-8"))
+    stored = _read_json(path, "remove the folder or use another --out")
     keys = list(RESUME_KEYS)
     if any(path.parent.glob("parts/*_perception_*.json")) and requested["pose_weights_sha256"] is not None:
         keys.append("pose_weights_sha256")  # perception parts made with other weights are stale
@@ -194,9 +210,9 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
 
     out = Path(out)
     parts = out / "parts"
-    parts.mkdir(parents=True, exist_ok=True)
     settings = _settings(config)
     _check_resumable(out / "sweep_config.json", settings)
+    parts.mkdir(parents=True, exist_ok=True)
     write_atomic(out / "sweep_config.json", json.dumps(settings, sort_keys=True))
     tasks = plan_tasks(config)
     todo = [t for t in tasks if not (parts / f"{t.name}.json").exists()]
@@ -214,7 +230,7 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
     bar.close()
     rows = []
     for task in tasks:
-        rows.extend(json.loads((parts / f"{task.name}.json").read_text(encoding="utf-8")))
+        rows.extend(_read_json(parts / f"{task.name}.json", "delete it and run the sweep again to redo that task"))
     return rows
 
 
@@ -222,14 +238,18 @@ def _cmd_sweep(args: Any) -> int:
     import shlex
     import sys
 
-    config = SweepConfig(
-        errors_deg=tuple(args.errors), episodes=args.episodes, seed=args.seed,
-        num_mushrooms=args.num_mushrooms, variants=tuple(args.variants), chunk=args.chunk,
-        perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
-    )
+    try:
+        config = SweepConfig(
+            errors_deg=tuple(args.errors), episodes=args.episodes, seed=args.seed,
+            num_mushrooms=args.num_mushrooms, variants=tuple(args.variants), chunk=args.chunk,
+            perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
+        )
+    except ConfigError as exc:
+        print(f"sms3d sweep: error: argument {SWEEP_FLAGS.get(exc.field, exc.field)}: {exc.message}", file=sys.stderr)
+        return 2
     try:
         rows = run_sweep(config, args.out, workers=args.workers)
-    except ValueError as exc:
+    except (ValueError, CorruptFileError) as exc:
         print(f"sms3d sweep: error: {exc}", file=sys.stderr)
         return 2
     command = "sms3d " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["sweep"] else ""
@@ -239,13 +259,20 @@ def _cmd_sweep(args: Any) -> int:
     return 0
 
 
+# The flag that sets each field SweepConfig checks, to report a refused value by what was typed.
+SWEEP_FLAGS = {"errors_deg": "--errors", "episodes": "--episodes", "chunk": "--chunk", "seed": "--seed",
+               "perception_episodes": "--perception-episodes", "variants": "--variants",
+               "placement.num_mushrooms": "--num-mushrooms"}
+
+
 def register(subparsers: Any) -> None:
     """Add ``sms3d sweep``."""
     p = subparsers.add_parser("sweep", help="pick success of the scripted picker against orientation error")
     p.add_argument("--out", required=True, help="output folder (resumes if it holds earlier parts)")
-    p.add_argument("--errors", type=float, nargs="+", default=list(DEFAULT_ERRORS_DEG), help="errors in degrees")
-    p.add_argument("--episodes", type=int, default=40, help="seeded episodes per error (default 40)")
-    p.add_argument("--seed", type=int, default=0, help="first episode seed")
+    p.add_argument("--errors", type=float, nargs="+", default=list(DEFAULT_ERRORS_DEG),
+                   help="errors in degrees, each in [0, 180]")
+    p.add_argument("--episodes", type=int, default=40, help="seeded episodes per error (>= 1, default 40)")
+    p.add_argument("--seed", type=int, default=0, help="first episode seed (>= 0)")
     p.add_argument("--num-mushrooms", type=int, default=25)
     p.add_argument("--variants", nargs="+", default=["default"], choices=sorted(SENSITIVITY_VARIANTS),
                    help="physics settings to compare (sensitivity to unsourced assumptions)")
@@ -253,6 +280,6 @@ def register(subparsers: Any) -> None:
                    help="also run this many episodes with the perception pose source (shipped network)")
     p.add_argument("--perception-detector", help="train-detector checkpoint whose masks the perception episodes use "
                                                   "(default: MuJoCo's segmentation masks)")
-    p.add_argument("--chunk", type=int, default=10, help="episodes per resumable task")
+    p.add_argument("--chunk", type=int, default=10, help="episodes per resumable task (>= 1)")
     p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 1)), help="processes")
     p.set_defaults(func=_cmd_sweep)

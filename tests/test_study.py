@@ -6,6 +6,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from generator.cli import main
+from generator.dataset.errors import CorruptFileError
+from generator.errors import ConfigError
 from sms3d_env import study_report
 from sms3d_env.accuracy_study import SweepConfig, plan_tasks, run_sweep
 from sms3d_env.study_report import success_table, tolerable_error, wilson_interval, write_report
@@ -58,6 +61,45 @@ def test_config_validation():
         SweepConfig(variants=("bogus",))
     tasks = plan_tasks(SweepConfig(errors_deg=(0, 5), episodes=5, chunk=2))
     assert len(tasks) == 6 and tasks[0].episode_seeds == (0, 1) and tasks[2].episode_seeds == (4,)
+
+
+@given(st.sampled_from([("episodes", 1), ("chunk", 1), ("perception_episodes", 0), ("seed", 0)]),
+       st.one_of(st.integers(max_value=-1), st.floats(allow_nan=True), st.booleans(), st.text(max_size=3)))
+def test_config_refuses_counts_that_are_not_integers_in_range(field_and_least, value):
+    name, least = field_and_least
+    if isinstance(value, int) and not isinstance(value, bool) and value >= least:
+        return  # an integer in range (0 for the counts that may be 0)
+    with pytest.raises(ConfigError) as info:
+        SweepConfig(**{name: value})
+    assert info.value.field == name
+
+
+@pytest.mark.parametrize("flags", [["--errors", "-5"], ["--errors", "nan"], ["--errors", "0", "181"],
+                                   ["--episodes", "0"], ["--chunk", "0"], ["--seed", "-1"],
+                                   ["--perception-episodes", "-1"], ["--num-mushrooms", "0"]])
+def test_sweep_refuses_bad_flags_by_name_and_creates_nothing(tmp_path, capsys, flags):
+    out = tmp_path / "sweep"
+    assert main(["sweep", "--out", str(out), "--workers", "1", *flags]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"sms3d sweep: error: argument {flags[0]}: "), err
+    assert not out.exists()
+
+
+def test_a_sweep_that_finished_no_task_does_not_block_the_next_and_a_bad_part_is_named(tmp_path, capsys):
+    # A sweep that stopped before any task finished left its settings and no parts.
+    (tmp_path / "parts").mkdir()
+    (tmp_path / "sweep_config.json").write_text(json.dumps({"seed": 5, "num_mushrooms": 3}))
+    args = ["sweep", "--out", str(tmp_path), "--errors", "0", "--episodes", "1", "--num-mushrooms", "8",
+            "--workers", "1"]
+    assert main(args) == 0
+    assert json.loads((tmp_path / "sweep_config.json").read_text())["seed"] == 0
+    part = tmp_path / "parts" / "default_e0_s0-0.json"
+    part.write_text(part.read_text()[:40])  # truncated
+    with pytest.raises(CorruptFileError, match="default_e0_s0-0.json"):
+        run_sweep(SweepConfig(errors_deg=(0.0,), episodes=1, num_mushrooms=8), tmp_path, progress=False)
+    capsys.readouterr()
+    assert main(args) == 2
+    assert str(part) in capsys.readouterr().err
 
 
 def test_small_sweep_resumes_and_reports(tmp_path):
