@@ -66,6 +66,19 @@ class NoisyPose:
         return PoseEstimate(np.asarray(centre, float), rot)
 
 
+class UniformNoisyPose:
+    """A ``NoisyPose`` whose error is drawn per episode, uniformly in ``[low_deg, high_deg]``:
+    training under a spread of pose errors (the error is not observed, as on a robot)."""
+
+    def __init__(self, low_deg: float, high_deg: float) -> None:
+        if not (np.isfinite(low_deg) and np.isfinite(high_deg) and 0 <= low_deg <= high_deg <= 180):
+            raise ValueError(f"need 0 <= low_deg <= high_deg <= 180, got {low_deg!r}, {high_deg!r}")
+        self.low_deg, self.high_deg = float(low_deg), float(high_deg)
+
+    def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:
+        return NoisyPose(rng.uniform(self.low_deg, self.high_deg))(scene, instance_id, rng)
+
+
 def make_pose_source(kind: str | PoseSource, pose_error_deg: float = 0.0,
                      position_std: float = 0.0) -> PoseSource:
     """``"oracle"``, ``"noisy"``, ``"perception"`` (the two-stage pipeline with the shipped pose

@@ -30,7 +30,7 @@ ALGOS = ("ppo", "sac")
 POSE_SOURCES = ("oracle", "noisy")
 REWARD_TYPES = ("dense", "sparse", "staged")
 ENV_IDS = ("SMS3DPick-v0", "SMS3DPickTrain-v0")
-RECIPES = ("rl", "bc")
+RECIPES = ("rl", "bc", "residual")
 #: The shipped pick policy (``model.zip`` with its ``config.json``, ``README.md``, metrics).
 SHIPPED_POLICY = Path(__file__).parent / "weights" / "pick_policy" / "model.zip"
 VECNORM_FILE = "vecnormalize.pkl"
@@ -58,6 +58,11 @@ class TrainConfig:
             learnable options: latched suction, staged reward, dead-end episode end, task
             observations; ``reward_type`` is then ignored and must stay at its default).
         normalize: standardise observations with running statistics (``VecNormalize``).
+        residual_scale: > 0 trains a residual on top of the scripted picker
+            (:class:`sms3d_env.residual.ResidualPicker` with this scale); 0: the policy acts alone.
+        pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
+            uniformly in that range (``pose_source`` must then be ``"noisy"`` and
+            ``pose_error_deg`` 0).
         reward_type: ``"dense"``, ``"sparse"`` or ``"staged"``.
         num_mushrooms: mushrooms per generated scene.
         max_episode_steps: episode limit (the registered env uses 250).
@@ -73,6 +78,8 @@ class TrainConfig:
     algo: str = "ppo"
     env_id: str = "SMS3DPick-v0"
     normalize: bool = False
+    residual_scale: float = 0.0
+    pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
     max_wall_s: float | None = None
     n_envs: int = 1
@@ -114,6 +121,16 @@ class TrainConfig:
             raise bad("reward_type", "is set by SMS3DPickTrain-v0 (staged); leave it at its default")
         if not isinstance(self.normalize, bool):
             raise bad("normalize", "must be a bool")
+        if not (isinstance(self.residual_scale, (int, float)) and math.isfinite(self.residual_scale)
+                and 0 <= self.residual_scale <= 2):
+            raise bad("residual_scale", "must be a number in [0, 2]")
+        if self.pose_error_range_deg is not None:
+            rng = tuple(float(v) for v in self.pose_error_range_deg)
+            if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:
+                raise bad("pose_error_range_deg", "must be (low, high) with 0 <= low <= high <= 180")
+            if self.pose_source != "noisy" or self.pose_error_deg:
+                raise bad("pose_error_range_deg", "needs pose_source='noisy' and pose_error_deg=0")
+            object.__setattr__(self, "pose_error_range_deg", rng)
         for name in ("total_steps", "n_envs", "torch_threads", "num_mushrooms", "max_episode_steps", "eval_episodes",
                      "batch_size", "n_steps", "buffer_size"):
             v = getattr(self, name)
@@ -147,7 +164,12 @@ class TrainConfig:
                         self.position_noise, self.reward_type, self.max_episode_steps)
         if self.env_id != "SMS3DPick-v0":
             kw.pop("reward_type")  # the training id sets its own
-        return {"env_id": self.env_id, **kw}
+        if self.pose_error_range_deg is not None and pose_error_deg is None:
+            from sms3d_env.pose_source import UniformNoisyPose
+
+            kw.pop("pose_error_deg")
+            kw["pose_source"] = UniformNoisyPose(*self.pose_error_range_deg)
+        return {"env_id": self.env_id, "residual_scale": self.residual_scale, **kw}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
@@ -172,13 +194,19 @@ def env_kwargs(num_mushrooms: int, pose_source: str, pose_error_deg: float, posi
     return kw
 
 
-def _make_env(env_id: str = "SMS3DPick-v0", **kwargs: Any) -> Any:
-    """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it."""
+def _make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, **kwargs: Any) -> Any:
+    """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``
+    > 0 wraps the env in a ``ResidualPicker``."""
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the env ids)
 
-    return gym.make(env_id, **kwargs)
+    env = gym.make(env_id, **kwargs)
+    if residual_scale > 0:
+        from sms3d_env.residual import ResidualPicker
+
+        env = ResidualPicker(env, residual_scale)
+    return env
 
 
 def _vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | None) -> Any:
@@ -337,6 +365,7 @@ class PolicyActor:
             self.saved = json.loads((path.parent / "config.json").read_text())
         self.env_id = self.saved.get("env_id", "SMS3DPick-v0")
         self.env_options = dict(self.saved.get("env_options", {}))
+        self.residual_scale = float(self.saved.get("residual_scale", 0.0))
         self.model = load_model(path, algo)
         self.obs_stats = None
         if (path.parent / VECNORM_FILE).is_file():
@@ -391,7 +420,7 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # per-step inference of a small MLP: more threads only add overhead
-    env = _make_env(actor.env_id, **kw)
+    env = _make_env(actor.env_id, actor.residual_scale, **kw)
     causes: Counter[str] = Counter()
     successes = reachable = reach_succ = detached = held = 0
     returns, lengths, per_episode = [], [], []
@@ -443,9 +472,14 @@ def success_line(res: dict[str, Any]) -> str:
 def _cmd_train(args: Any) -> int:
     if args.recipe == "bc":
         return _cmd_train_bc(args)
-    pose_source = args.pose_source or ("noisy" if args.pose_error_deg > 0 else "oracle")
+    noisy = args.pose_error_deg > 0 or args.pose_error_range is not None
+    pose_source = args.pose_source or ("noisy" if noisy else "oracle")
+    residual = args.recipe == "residual"
     try:
-        cfg = TrainConfig(algo=args.algo, env_id=args.env_id, normalize=args.normalize,
+        cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v0" if residual else args.env_id,
+                          normalize=args.normalize or residual,
+                          residual_scale=args.residual_scale if residual else 0.0,
+                          pose_error_range_deg=args.pose_error_range,
                           total_steps=args.steps, max_wall_s=args.max_wall_s,
                           n_envs=args.n_envs, pose_source=pose_source, pose_error_deg=args.pose_error_deg,
                           reward_type=args.reward_type, num_mushrooms=args.num_mushrooms, seed=args.seed,
@@ -497,7 +531,8 @@ def register(subparsers: Any) -> None:
                              "cloning of the scripted picker (--recipe bc)")
     p.add_argument("--recipe", choices=RECIPES, default="rl",
                    help="rl: PPO/SAC from scratch (default); bc: scripted demonstrations -> "
-                        "behaviour cloning on SMS3DPickTrain-v0 (sms3d_env.imitation)")
+                        "behaviour cloning on SMS3DPickTrain-v0 (sms3d_env.imitation); residual: "
+                        "PPO/SAC on top of the scripted picker on SMS3DPickTrain-v0 (sms3d_env.residual)")
     p.add_argument("--algo", choices=ALGOS, default=defaults.algo)
     p.add_argument("--env-id", choices=ENV_IDS, default=defaults.env_id,
                    help="SMS3DPickTrain-v0: the learnable options (latched suction, staged reward, ...)")
@@ -508,6 +543,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--pose-source", choices=POSE_SOURCES, default=None,
                    help="default: noisy if --pose-error-deg > 0, else oracle")
     p.add_argument("--pose-error-deg", type=float, default=0.0)
+    p.add_argument("--pose-error-range", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                   help="train under a pose error drawn per episode in [LOW, HIGH] degrees")
+    p.add_argument("--residual-scale", type=float, default=0.5,
+                   help="--recipe residual: the residual's largest share of each command")
     p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)
     p.add_argument("--out", default=defaults.out, help="run folder (model.zip, progress.csv, ...)")
     p.add_argument("--seed", type=int, default=defaults.seed)

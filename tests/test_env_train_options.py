@@ -243,3 +243,36 @@ def test_env_numeric_arguments_property(field, value):
 def test_env_image_size_property(size):
     with pytest.raises(ValueError, match="image_size"):
         sms3d_env.SMS3DPickEnv(image_size=size)
+
+
+def test_a_zero_residual_is_the_scripted_picker_exactly():
+    from sms3d_env.residual import ResidualPicker
+    from sms3d_env.scripted_picker import run_episode
+
+    plain = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
+    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), scale=0.5)
+    obs, _ = env.reset(seed=2)
+    assert env.observation_space.contains(obs)
+    done, steps = False, 0
+    while not done:
+        obs, _, terminated, truncated, info = env.step(np.zeros(7, np.float32))
+        steps += 1
+        done = terminated or truncated
+    assert (info["is_success"], steps) == (expected["success"], expected["steps"])
+    with pytest.raises(ValueError, match="residual scale"):
+        ResidualPicker(plain, scale=0.0)
+
+
+def test_uniform_noisy_pose_errs_within_its_range():
+    from sms3d_env.pose_source import UniformNoisyPose
+
+    scene = generator.generate_scene(SMALL, seed=0)
+    source, rng = UniformNoisyPose(10.0, 30.0), np.random.default_rng(0)
+    truth = scene.instances[0].rotation[:, 2]
+    errors = [np.degrees(np.arccos(np.clip(source(scene, 0, rng).stem_axis @ truth, -1, 1)))
+              for _ in range(200)]
+    assert 10.0 - 1e-6 <= min(errors) and max(errors) <= 30.0 + 1e-6
+    assert 18 < np.mean(errors) < 22  # uniform: mean 20
+    with pytest.raises(ValueError):
+        UniformNoisyPose(30.0, 10.0)

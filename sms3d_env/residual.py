@@ -1,0 +1,55 @@
+"""Residual pick policies: a learned correction added to the scripted picker's command
+(Silver et al. 2018, "Residual Policy Learning"; Johannink et al. 2019, "Residual Reinforcement
+Learning for Robot Control").
+
+``ResidualPicker`` wraps a pick env: the scripted picker (``ScriptedPicker.for_env``) runs inside
+it on the same observation, the policy's action in [-1, 1]^7 is scaled by ``scale`` and added to
+the picker's action, and the observation gains the picker's action (``base_action``) so that the
+policy knows what it corrects. An all-zero residual is the scripted picker exactly, so training
+starts from its success rate; PPO's action head starts near zero (orthogonal init, gain 0.01).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+
+class ResidualPicker(gym.Wrapper):
+    """``env`` driven by the scripted picker plus ``scale`` x the action.
+
+    Args:
+        env: a pick env (``SMS3DPick-v0`` or ``SMS3DPickTrain-v0``, any options).
+        scale: the residual's largest share of each normalised command (0 < scale <= 2).
+    """
+
+    def __init__(self, env: gym.Env, scale: float = 0.5) -> None:
+        super().__init__(env)
+        if not (isinstance(scale, (int, float)) and np.isfinite(scale) and 0 < scale <= 2):
+            raise ValueError(f"residual scale must be in (0, 2], got {scale!r}")
+        from sms3d_env.scripted_picker import ScriptedPicker
+
+        self.scale = float(scale)
+        self.picker = ScriptedPicker.for_env(env)
+        self.observation_space = spaces.Dict({
+            **env.observation_space.spaces,
+            "base_action": spaces.Box(-1.0, 1.0, (7,), np.float32)})
+        self._base = np.zeros(7, np.float32)
+
+    def _with_base(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        self._base = self.picker(obs)
+        return {**obs, "base_action": self._base}
+
+    def reset(self, **kwargs: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self.picker.reset()
+        return self._with_base(obs), info
+
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        a = np.asarray(action, np.float32)
+        command = np.clip(self._base + self.scale * np.clip(a, -1.0, 1.0), -1.0, 1.0)
+        obs, reward, terminated, truncated, info = self.env.step(command)
+        return self._with_base(obs), reward, terminated, truncated, info
