@@ -44,6 +44,18 @@ def _clear_errors(func):
     return run
 
 
+def _positive_int(text: str) -> int:
+    """argparse type of counts and limits (threads, scenes, images): an integer >= 1, refused
+    while parsing, before any model or dataset is loaded."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {value}")
+    return value
+
+
 def _set_threads(threads: int | None) -> None:
     """``--threads``; None (the default) keeps torch's own thread count, which the parser cannot
     ask for without importing torch."""
@@ -120,7 +132,7 @@ def cmd_show(args: argparse.Namespace) -> int:
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="dataset folder written by `sms3d generate`")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    p.add_argument("--threads", type=_positive_int, default=None, help="torch CPU threads (>= 1; default: torch's own)")
 
 
 def _pipeline_args(p: argparse.ArgumentParser) -> None:
@@ -143,7 +155,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--min-size", type=int, default=480, help="shorter image side the network sees")
     p.add_argument("--max-size", type=int, default=640, help="longer image side the network sees")
-    p.add_argument("--max-images", type=int, help="use only the first N training images")
+    p.add_argument("--max-images", type=_positive_int, help="use only the first N training images (N >= 1; default: all)")
     p.add_argument("--pretrained", action="store_true", help="start from torchvision weights already in the torch hub cache")
     p.add_argument("--no-augment", action="store_true", help="no random flips")
     p.add_argument("--restart", action="store_true", help="ignore an existing last.pt instead of resuming")
@@ -156,7 +168,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--split", choices=SPLITS, default="test")
     p.add_argument("--min-area", type=int, default=16, help="ground-truth masks smaller than this are ignored")
     p.add_argument("--score-threshold", type=float, default=0.5, help="score threshold for F1")
-    p.add_argument("--max-images", type=int)
+    p.add_argument("--max-images", type=_positive_int, help="evaluate only the first N images (N >= 1; default: all)")
     p.add_argument("--out", help="also write the report as JSON here")
     p.add_argument("--device", default="cpu")
     p.set_defaults(func=_clear_errors(cmd_eval))
@@ -166,7 +178,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _pipeline_args(p)
     p.add_argument("--split", choices=SPLITS, default="test")
     p.add_argument("--min-area", type=int, default=16)
-    p.add_argument("--max-scenes", type=int)
+    p.add_argument("--max-scenes", type=_positive_int, help="evaluate only the first N scenes (N >= 1; default: all)")
     p.add_argument("--out", help="also write summary and per-mushroom rows as JSON here")
     p.set_defaults(func=_clear_errors(cmd_eval_pipeline))
 

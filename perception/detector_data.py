@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import cv2
 import numpy as np
@@ -19,7 +19,10 @@ from torch.utils.data import Dataset
 
 from generator.dataset.coco import decode_mask
 from generator.dataset.errors import CorruptFileError
+from perception.errors import PerceptionConfigError
 from perception.maskrcnn import CATEGORIES
+
+T = TypeVar("T")
 
 
 def coco_path(root: str | Path, split: str) -> Path:
@@ -28,6 +31,17 @@ def coco_path(root: str | Path, split: str) -> Path:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no COCO file for split {split!r} (is {root} a finished `sms3d generate` folder?)")
     return path
+
+
+def first_n(items: list[T], limit: int | None, name: str) -> list[T]:
+    """The first ``limit`` of a split's ``items`` (all of them for ``None``). A limit below 1 is a
+    :class:`PerceptionConfigError` naming ``name``: a slice would take none (0) or quietly drop
+    the last item (-1)."""
+    if limit is None:
+        return items
+    if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
+        raise PerceptionConfigError(name, f"must be an integer >= 1 or None (all), got {limit!r}")
+    return items[:limit]
 
 
 def load_coco(root: str | Path, split: str) -> dict[str, Any]:

@@ -23,7 +23,7 @@ from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
 from perception.detector import Detection, Detector
-from perception.detector_data import CocoDetectionDataset
+from perception.detector_data import CocoDetectionDataset, first_n
 from perception.maskrcnn import CATEGORIES
 
 
@@ -126,7 +126,7 @@ def evaluate_detector(detector: Detector, root: str | Path, split: str = "test",
     """
     data = CocoDetectionDataset(root, split, category, min_area=0)
     category_id = CATEGORIES[category]
-    images = data.images[:max_images] if max_images else data.images
+    images = first_n(data.images, max_images, "max_images")
     image_ids = {im["id"] for im in images}
     gt = copy.deepcopy(data.coco)
     gt["images"] = images

@@ -22,7 +22,7 @@ from generator.dataset.readers import SceneSample, read_scene_files
 from generator.dataset.writer import scene_dirname
 from generator.geometry import tilt_angle
 from perception.detector import detections_from_labels, mask_iou
-from perception.detector_data import load_coco
+from perception.detector_data import first_n, load_coco
 from perception.pipeline import MushroomEstimate, PosePipeline
 
 SIZE_BINS_MM = (0.0, 35.0, 50.0, 65.0, 200.0)
@@ -173,8 +173,9 @@ def run_scene(pipeline: PosePipeline, sample: SceneSample, oracle: bool) -> list
 
 def evaluate_pipeline(pipeline: PosePipeline, root: str | Path, split: str = "test", oracle: bool = False,
                       min_area: int = 16, max_scenes: int | None = None, progress: bool = False) -> PipelineReport:
-    """Run ``pipeline`` (its detector, or oracle masks) on the scenes of ``split`` and match."""
-    indices = scene_indices(root, split)[:max_scenes] if max_scenes else scene_indices(root, split)
+    """Run ``pipeline`` (its detector, or oracle masks) on the first ``max_scenes`` scenes of
+    ``split`` (all of them for ``None``) and match."""
+    indices = first_n(scene_indices(root, split), max_scenes, "max_scenes")
     if progress:
         from tqdm import tqdm
         indices = tqdm(indices, desc=f"eval-pipeline {split}", unit="scene")

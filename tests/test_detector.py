@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from generator import SceneConfig
+from generator.cli import main as cli_main
 from generator.dataset import DatasetOptions, generate_dataset
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
@@ -27,6 +28,7 @@ from perception.maskrcnn import (
     save_detector,
 )
 from perception.pipeline import PosePipeline
+from perception.pose_net import PoseNet, PoseNetConfig
 from perception.show_estimates import estimates_figure
 from perception.train_detector import DetectorTrainConfig, train_detector
 
@@ -152,6 +154,32 @@ def test_checkpoint_errors_are_named(tmp_path):
     torch.save({"format": "something-else"}, tmp_path / "other.pt")
     with pytest.raises(CheckpointFormatError, match="not a Mask R-CNN"):
         MaskRCNNDetector.from_checkpoint(tmp_path / "other.pt")
+
+
+@pytest.mark.parametrize("command, flags", [
+    ("eval-pipeline", ["--max-scenes", "-1"]), ("eval-pipeline", ["--max-scenes", "0"]),
+    ("eval-pipeline", ["--threads", "0"]), ("eval-pipeline", ["--max-scenes", "two"]),
+    ("eval-detector", ["--max-images", "-1", "--checkpoint", "d.pt"]),
+])
+def test_counts_below_one_are_refused_by_flag_before_anything_runs(tmp_path, capsys, command, flags):
+    # --max-scenes -1 evaluated one scene fewer than there are and 0 all of them; --threads 0
+    # was a RuntimeError from torch after the weights had loaded.
+    out = tmp_path / "report.json"
+    with pytest.raises(SystemExit) as info:
+        cli_main([command, "--data", str(tmp_path), "--out", str(out), *flags])
+    assert info.value.code == 2
+    assert f"argument {flags[0]}: " in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_evaluation_limits_below_one_are_refused(beds):
+    pipeline = PosePipeline(PoseEstimator(PoseNet(PoseNetConfig(backbone="pointnet", num_points=128, hidden=16))))
+    for bad in (0, -1):
+        with pytest.raises(PerceptionConfigError, match="max_scenes"):
+            evaluate_pipeline(pipeline, beds, "train", oracle=True, max_scenes=bad)
+        with pytest.raises(PerceptionConfigError, match="max_images"):
+            evaluate_detector(OracleDetector(beds), beds, "train", max_images=bad)
+    assert evaluate_pipeline(pipeline, beds, "train", oracle=True, max_scenes=1).scenes == 1
 
 
 def test_oracle_pipeline_finds_every_mushroom_with_the_networks_error(beds, tmp_path):
