@@ -9,6 +9,7 @@ physics steps run with the picking model of ``physics.py`` checked after each.
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 import warnings
@@ -159,6 +160,10 @@ class SMS3DPickEnv(gym.Env):
             reset and since the seal, twist since the seal) and ``wrist_wrench`` (wrist F/T).
         horizon: control steps per episode that the staged reward's success bonus assumes (the
             registered time limit, 250).
+        scene_pool: > 0: draw each reset's bed from a pool of this many ``scene_config`` beds
+            (seeds ``pool_seed .. pool_seed + scene_pool - 1``, each generated on first use and
+            kept) instead of generating a new one: training resets cost physics, not placement.
+            Combine with ``target_rule="random"`` for a fresh target per reset.
 
     Training options (``SMS3DPickTrain-v0`` sets them all: ``suction_mode="latched"``,
     ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``): see
@@ -195,6 +200,8 @@ class SMS3DPickEnv(gym.Env):
         end_on_dead_end: bool = False,
         task_obs: bool = False,
         horizon: int = 250,
+        scene_pool: int = 0,
+        pool_seed: int = 0,
     ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
@@ -210,6 +217,11 @@ class SMS3DPickEnv(gym.Env):
             raise ValueError(f"suction_mode must be one of {SUCTION_MODES}, got {suction_mode!r}")
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"horizon must be an integer >= 1, got {horizon!r}")
+        for name, v in (("scene_pool", scene_pool), ("pool_seed", pool_seed)):
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"{name} must be an integer >= 0, got {v!r}")
+        if scene_pool and scenes is not None:
+            raise ValueError("scene_pool draws generated beds; with scenes given it would be ignored")
         _check_args(pose_source, pose_error_deg, position_noise, target_rule, image_size,
                     render_size, max_tilt_deg, free_radius, scene_config)
         self.robot_cfg = robot or RobotConfig()
@@ -241,6 +253,9 @@ class SMS3DPickEnv(gym.Env):
         self.free_radius = free_radius
         self.suction_mode, self.end_on_dead_end = suction_mode, bool(end_on_dead_end)
         self.task_obs, self.horizon = bool(task_obs), horizon
+        self.scene_pool, self.pool_seed = scene_pool, pool_seed
+        self._pool: dict[int, Any] = {}
+        self._pool_models: dict[tuple[int, int], mujoco.MjModel] = {}
 
         self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
         self.home_q = np.asarray(self.robot_cfg.home_q, float)
@@ -264,30 +279,37 @@ class SMS3DPickEnv(gym.Env):
         self._ep = _EpisodeState()
 
     # ------------------------------------------------------------------ model assembly
-    def _scene_for_reset(self, options: dict[str, Any]) -> Any:
+    def _scene_for_reset(self, options: dict[str, Any]) -> tuple[Any, int | None]:
+        """The reset's scene, and its pool slot (None outside a pool)."""
         if self.scenes is not None:
             k = options.get("scene")
             k = int(self.np_random.integers(len(self.scenes))) if k is None else int(k)
-            return self.scenes[k]
+            return self.scenes[k], None
         import generator
 
         cfg = self.scene_config
         if cfg is None:
             cfg = generator.SceneConfig().replace(placement__num_mushrooms=25)
-        return generator.generate_scene(cfg, seed=int(self.np_random.integers(2**31 - 1)))
+        if not self.scene_pool:
+            return generator.generate_scene(cfg, seed=int(self.np_random.integers(2**31 - 1))), None
+        k = int(self.np_random.integers(self.scene_pool))
+        if k not in self._pool:
+            self._pool[k] = generator.generate_scene(cfg, seed=self.pool_seed + k)
+        return self._pool[k], k
 
-    def _build(self, scene: Any, target: int) -> None:
+    def _compile(self, scene: Any, free: set[int], pool_key: tuple[int, int] | None) -> mujoco.MjModel:
+        """The scene + robot model; in a pool, compiled once per (bed, target) and copied (3 ms
+        against 45 ms), as the episode changes the model (contact masks, weld data)."""
+        cached = self._pool_models.get(pool_key) if pool_key is not None else None
+        if cached is None:
+            cached = self._spec(scene, free).compile()
+            if pool_key is not None:
+                self._pool_models[pool_key] = cached
+        return copy.copy(cached) if pool_key is not None else cached
+
+    def _spec(self, scene: Any, free: set[int]) -> mujoco.MjSpec:
         from generator.mjcf import scene_to_spec
 
-        n = len(scene.instances)
-        base = np.array([np.asarray(inst.position, float) for inst in scene.instances])
-        if self.free_radius is None:
-            free = set(range(n))
-        else:
-            near = np.linalg.norm(base - base[target], axis=1) <= self.free_radius
-            free = {int(i) for i in np.nonzero(near)[0]} | {int(target)}
-        self.is_free = np.array([i in free for i in range(n)])
-        self.free_ids = np.array(sorted(free))
         spec = scene_to_spec(scene, free_ids=free)
         attach_robot(spec, self.robot_cfg)
         suction = self.tool == "suction"
@@ -304,8 +326,6 @@ class SMS3DPickEnv(gym.Env):
             # stays as its accuracy study measured it.
             spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
             spec.option.impratio = 10.0
-        socket = 0 if suction else ph.SOCKET_CONAFFINITY
-        self._free_aff, self._lifted_aff = ph.FREE_CONAFFINITY | socket, ph.LIFTED_CONAFFINITY | socket
         spec.worldbody.add_camera(name="side", pos=[0.0, -0.42, 0.28],
                                   xyaxes=[1, 0, 0, 0, 0.6, 0.8], fovy=50)
         spec.option.timestep = self.control_dt / self.substeps
@@ -314,8 +334,23 @@ class SMS3DPickEnv(gym.Env):
         # documents, when the tool touches them or a grip weld joins them to the awake arm (an
         # actuated tree, which never sleeps). Same picker outcomes (benchmarks/RESULTS.md).
         spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+        return spec
+
+    def _build(self, scene: Any, target: int, pool_key: tuple[int, int] | None = None) -> None:
+        n = len(scene.instances)
+        base = np.array([np.asarray(inst.position, float) for inst in scene.instances])
+        if self.free_radius is None:
+            free = set(range(n))
+        else:
+            near = np.linalg.norm(base - base[target], axis=1) <= self.free_radius
+            free = {int(i) for i in np.nonzero(near)[0]} | {int(target)}
+        self.is_free = np.array([i in free for i in range(n)])
+        self.free_ids = np.array(sorted(free))
+        suction = self.tool == "suction"
+        socket = 0 if suction else ph.SOCKET_CONAFFINITY
+        self._free_aff, self._lifted_aff = ph.FREE_CONAFFINITY | socket, ph.LIFTED_CONAFFINITY | socket
         self._disown_renderers()
-        m = spec.compile()
+        m = self._compile(scene, free, pool_key)
         d = mujoco.MjData(m)
         terrain = self.terrain_geom = m.geom("terrain").id
         m.geom_contype[terrain], m.geom_conaffinity[terrain] = ph.SOIL_CONTYPE, ph.SOIL_CONAFFINITY
@@ -372,7 +407,7 @@ class SMS3DPickEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = dict(options or {})
-        scene = self._scene_for_reset(options)
+        scene, slot = self._scene_for_reset(options)
         ep = _EpisodeState()
         if "target" in options:
             ep.target, ep.reachable = select_target(scene, "index", self.np_random, self.reach,
@@ -384,7 +419,7 @@ class SMS3DPickEnv(gym.Env):
                                                     max_tilt_deg=self.max_tilt_deg)
         ep.estimate = self.pose_source(scene, ep.target, self.np_random)
         ep.target_pose = np.concatenate([ep.estimate.cap_top, ep.estimate.stem_axis])
-        self._build(scene, ep.target)
+        self._build(scene, ep.target, None if slot is None else (slot, ep.target))
         m, d = self.model, self.data
         self._ep = ep
         d.qpos[self.arm_qadr] = self.home_q

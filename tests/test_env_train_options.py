@@ -276,3 +276,19 @@ def test_uniform_noisy_pose_errs_within_its_range():
     assert 18 < np.mean(errors) < 22  # uniform: mean 20
     with pytest.raises(ValueError):
         UniformNoisyPose(30.0, 10.0)
+
+
+def test_scene_pool_reuses_beds_and_replays_episodes_exactly():
+    from sms3d_env.scripted_picker import run_episode
+
+    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL, scene_pool=1, pool_seed=7)
+    picker = ScriptedPicker.for_env(env)
+    first = run_episode(env, picker, seed=4)
+    assert env.unwrapped.scene is env.unwrapped._pool[0]
+    expected = generator.generate_scene(SMALL, seed=7)
+    np.testing.assert_array_equal(env.unwrapped.scene.terrain.heights, expected.terrain.heights)
+    # The pool's compiled model is copied per episode: a replay is the same episode.
+    again = run_episode(env, picker, seed=4)
+    assert (again["success"], again["steps"], again["return"]) == (first["success"], first["steps"], first["return"])
+    with pytest.raises(ValueError, match="scene_pool"):
+        sms3d_env.SMS3DPickEnv(scene_pool=-1)
