@@ -53,6 +53,7 @@ class SweepConfig:
     perception_detector: str | None = None  # a train-detector checkpoint; None: segmentation masks
     chunk: int = 10  # episodes per task (one part file)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
+    picker: str = "scripted"  # "scripted", "policy[:PATH]" or "residual:PATH" (sms3d_env.pickers)
 
     def __post_init__(self) -> None:
         """Raise :class:`~generator.errors.ConfigError` naming the field. Everything is checked
@@ -71,6 +72,12 @@ class SweepConfig:
         if unknown:
             raise ConfigError("variants", f"unknown physics variants {unknown}; choose from {sorted(SENSITIVITY_VARIANTS)}")
         SceneConfig().replace(placement__num_mushrooms=self.num_mushrooms)  # the generator's own range
+        from sms3d_env.pickers import parse_picker
+
+        try:
+            parse_picker(self.picker)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ConfigError("picker", str(exc)) from exc
 
 
 @dataclass(frozen=True)
@@ -121,10 +128,9 @@ def _perception_pipeline(detector_checkpoint: str | None) -> Any:
 
 def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     """Run one task's episodes in this process and return one row per episode."""
-    import gymnasium as gym
-
     from generator import SceneConfig
-    from sms3d_env.scripted_picker import ScriptedPicker, run_episode
+    from sms3d_env.pickers import make_picker_env, parse_picker
+    from sms3d_env.scripted_picker import run_episode
 
     physics = PickPhysicsParams(**SENSITIVITY_VARIANTS[task.variant])
     if task.source == "perception":
@@ -133,20 +139,20 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
         source: Any = PerceptionPose(_perception_pipeline(config.perception_detector))
     else:
         source = "noisy"
-    env = gym.make(
-        "SMS3DPick-v0",
-        scene_config=SceneConfig().replace(placement__num_mushrooms=config.num_mushrooms),
+    spec = parse_picker(config.picker)
+    env, picker = make_picker_env(
+        spec, scene_config=SceneConfig().replace(placement__num_mushrooms=config.num_mushrooms),
         pose_source=source, pose_error_deg=0.0 if task.source == "perception" else task.error_deg,
         physics=physics, **config.env_kwargs,
     )
-    picker = ScriptedPicker.for_env(env)
     rows = []
     try:
         for seed in task.episode_seeds:
             result = run_episode(env, picker, seed)
             axis_error = source.last_axis_error_deg if task.source == "perception" else task.error_deg
             rows.append({
-                "variant": task.variant, "source": task.source, "error_deg": task.error_deg,
+                "variant": task.variant, "picker": spec.label, "source": task.source,
+                "error_deg": task.error_deg,
                 "axis_error_deg": axis_error, **result,
                 **target_features(env.unwrapped.scene, result["target"]),
             })
@@ -163,7 +169,10 @@ def _run_and_save(task: Task, config: SweepConfig, parts: Path) -> str:
 
 # Settings that change what a part file holds without changing its name: a folder's parts can
 # only be reused by a sweep that agrees on them (errors, episodes and variants may grow).
-RESUME_KEYS = ("seed", "num_mushrooms", "chunk", "env_kwargs", "perception_detector")
+RESUME_KEYS = ("seed", "num_mushrooms", "chunk", "env_kwargs", "perception_detector", "picker",
+               "picker_sha256")
+# What a folder recorded before a key existed (its parts were made with this value).
+_RESUME_DEFAULTS = {"picker": "scripted", "picker_sha256": None}
 
 
 def _pose_weights_digest() -> str:
@@ -175,10 +184,25 @@ def _pose_weights_digest() -> str:
     return hashlib.sha256(default_weights_path().read_bytes()).hexdigest()[:16]
 
 
+def _picker_digest(config: SweepConfig) -> str | None:
+    """SHA-256 (16 hex digits) of a learned picker's model, None for the scripted picker."""
+    import hashlib
+
+    from sms3d_env.pickers import parse_picker
+    from sms3d_env.training import SHIPPED_POLICY
+
+    spec = parse_picker(config.picker)
+    if spec.kind == "scripted":
+        return None
+    return hashlib.sha256(Path(spec.path or SHIPPED_POLICY).read_bytes()).hexdigest()[:16]
+
+
 def _settings(config: SweepConfig) -> dict[str, Any]:
-    """What ``sweep_config.json`` records: the config, and the pose weights behind perception parts."""
+    """What ``sweep_config.json`` records: the config, the pose weights behind perception parts
+    and the learned picker's model."""
     digest = _pose_weights_digest() if config.perception_episodes else None
-    return json.loads(json.dumps({**dataclasses.asdict(config), "pose_weights_sha256": digest}, default=str))
+    return json.loads(json.dumps({**dataclasses.asdict(config), "pose_weights_sha256": digest,
+                                  "picker_sha256": _picker_digest(config)}, default=str))
 
 
 def _read_json(path: Path, remedy: str) -> Any:
@@ -198,7 +222,8 @@ def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
     keys = list(RESUME_KEYS)
     if any(path.parent.glob("parts/*_perception_*.json")) and requested["pose_weights_sha256"] is not None:
         keys.append("pose_weights_sha256")  # perception parts made with other weights are stale
-    differ = {k: (stored.get(k), requested[k]) for k in keys if stored.get(k) != requested[k]}
+    differ = {k: (stored.get(k, _RESUME_DEFAULTS.get(k)), requested[k]) for k in keys
+              if stored.get(k, _RESUME_DEFAULTS.get(k)) != requested[k]}
     if differ:
         details = ", ".join(f"{k}: folder has {a!r}, requested {b!r}" for k, (a, b) in differ.items())
         raise ValueError(f"{path.parent} holds a sweep with other settings ({details}); use another --out")
@@ -243,6 +268,7 @@ def _cmd_sweep(args: Any) -> int:
             errors_deg=tuple(args.errors), episodes=args.episodes, seed=args.seed,
             num_mushrooms=args.num_mushrooms, variants=tuple(args.variants), chunk=args.chunk,
             perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
+            picker=args.picker,
         )
     except ConfigError as exc:
         print(f"sms3d sweep: error: argument {SWEEP_FLAGS.get(exc.field, exc.field)}: {exc.message}", file=sys.stderr)
@@ -259,10 +285,39 @@ def _cmd_sweep(args: Any) -> int:
     return 0
 
 
+def load_rows(folder: str | Path) -> list[dict[str, Any]]:
+    """Every row of a sweep folder's part files (any order of tasks; sorted by name)."""
+    parts = sorted(Path(folder, "parts").glob("*.json"))
+    if not parts:
+        raise FileNotFoundError(f"{folder} holds no sweep parts (run sms3d sweep --out {folder} first)")
+    rows: list[dict[str, Any]] = []
+    for path in parts:
+        rows.extend(_read_json(path, "delete it and run the sweep again to redo that task"))
+    return rows
+
+
+def _cmd_compare(args: Any) -> int:
+    import sys
+
+    from sms3d_env.study_report import plot_pickers
+
+    try:
+        curves = {}
+        for folder in args.sweeps:
+            rows = load_rows(folder)
+            curves[rows[0].get("picker", "scripted")] = rows
+    except (FileNotFoundError, CorruptFileError) as exc:
+        print(f"sms3d sweep-compare: error: {exc}", file=sys.stderr)
+        return 2
+    plot_pickers(curves, args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
 # The flag that sets each field SweepConfig checks, to report a refused value by what was typed.
 SWEEP_FLAGS = {"errors_deg": "--errors", "episodes": "--episodes", "chunk": "--chunk", "seed": "--seed",
                "perception_episodes": "--perception-episodes", "variants": "--variants",
-               "placement.num_mushrooms": "--num-mushrooms"}
+               "placement.num_mushrooms": "--num-mushrooms", "picker": "--picker"}
 
 
 def register(subparsers: Any) -> None:
@@ -280,6 +335,14 @@ def register(subparsers: Any) -> None:
                    help="also run this many episodes with the perception pose source (shipped network)")
     p.add_argument("--perception-detector", help="train-detector checkpoint whose masks the perception episodes use "
                                                   "(default: MuJoCo's segmentation masks)")
+    p.add_argument("--picker", default="scripted",
+                   help="scripted (default), policy (the shipped policy), policy:PATH/model.zip or "
+                        "residual:PATH/model.zip; every picker sees the same seeded episodes")
     p.add_argument("--chunk", type=int, default=10, help="episodes per resumable task (>= 1)")
     p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 1)), help="processes")
     p.set_defaults(func=_cmd_sweep)
+
+    c = subparsers.add_parser("sweep-compare", help="one figure of several sweeps' pickers (success vs error)")
+    c.add_argument("sweeps", nargs="+", help="sweep folders (each run with its own --picker)")
+    c.add_argument("--out", required=True, help="PNG to write")
+    c.set_defaults(func=_cmd_compare)

@@ -42,6 +42,12 @@ class BCConfig:
             onto the picker's clean actions (mean squared error, Adam).
         log_std: the Gaussian policy's log standard deviation after cloning (exploration of an
             RL fine-tuning; deterministic evaluation uses the mean).
+        dagger_rounds, dagger_episodes, dagger_epochs: DAgger (Ross et al. 2011) after the first
+            clone: per round, ``dagger_episodes`` episodes in which the clone acts (the picker
+            instead with probability 0.5^round) and the picker labels every state, then
+            ``dagger_epochs`` more epochs on everything so far. A clone alone stalls at the
+            stand-off point: the picker turns suction on there in one step, seen once per
+            demonstration; the clone's own hovering states teach it the switch.
     """
 
     episodes: int = 400
@@ -53,6 +59,9 @@ class BCConfig:
     learning_rate: float = 1e-3
     net_arch: tuple[int, ...] = (256, 256)
     log_std: float = -2.0
+    dagger_rounds: int = 3
+    dagger_episodes: int = 150
+    dagger_epochs: int = 15
     seed: int = 0
     out: str = "runs/bc"
     torch_threads: int = 1
@@ -61,12 +70,14 @@ class BCConfig:
         def bad(name: str, why: str) -> ValueError:
             return ValueError(f"BCConfig.{name} {why}, got {getattr(self, name)!r}")
 
-        for name in ("episodes", "epochs", "batch_size", "torch_threads"):
+        for name in ("episodes", "epochs", "batch_size", "torch_threads", "dagger_episodes", "dagger_epochs"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise bad(name, "must be an integer >= 1")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise bad("seed", "must be an integer >= 0")
+        for name in ("seed", "dagger_rounds"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise bad(name, "must be an integer >= 0")
         object.__setattr__(self, "num_mushrooms", tuple(self.num_mushrooms))
         object.__setattr__(self, "net_arch", tuple(self.net_arch))
         if not self.num_mushrooms or any(isinstance(n, bool) or not isinstance(n, int) or n < 1
@@ -92,6 +103,13 @@ class BCConfig:
                 "action_noise": self.action_noise, "pose_error_deg": self.pose_error_deg,
                 "seed": self.seed, "env_id": TRAIN_ENV_ID}
 
+    def dagger_settings(self, round_: int) -> dict[str, Any]:
+        """What DAgger round ``round_``'s data depend on (everything before it, too)."""
+        return {**self.demo_settings(), "round": round_, "epochs": self.epochs,
+                "batch_size": self.batch_size, "learning_rate": self.learning_rate,
+                "net_arch": list(self.net_arch), "dagger_episodes": self.dagger_episodes,
+                "dagger_epochs": self.dagger_epochs}
+
 
 def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0) -> dict[str, Any]:
     """``gym.make(TRAIN_ENV_ID, **kwargs)`` arguments for a bed size and pose error."""
@@ -104,9 +122,15 @@ def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0) -> dict[st
     return kw
 
 
-def collect_demonstrations(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
-    """Run the scripted picker (with DART noise) and return its successful episodes' steps:
-    one array per observation key (steps, n), ``actions`` (steps, 7) and ``episode`` (steps,)."""
+def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
+              desc: str = "demonstrations", progress: bool = True) -> dict[str, np.ndarray]:
+    """Episodes labelled with the scripted picker's clean actions.
+
+    The expert acts (with DART noise) in an episode with probability ``beta``, else ``actor``
+    does while the expert shadows it on the same observations (DAgger). Expert episodes are kept
+    only if they succeed; learner episodes keep every state the expert can label: not those
+    after the expert, never having seen the seal it waited for, gave up and turned to lifting.
+    Returns one array per observation key (steps, n), ``actions`` (steps, 7) and ``episode``."""
     import gymnasium as gym
     from tqdm import tqdm
 
@@ -114,34 +138,40 @@ def collect_demonstrations(cfg: BCConfig, progress: bool = True) -> dict[str, np
     from sms3d_env.scripted_picker import ScriptedPicker
 
     envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg)) for n in cfg.num_mushrooms]
-    rng = np.random.default_rng(cfg.seed)
+    rng = np.random.default_rng([cfg.seed, seeds.start])
     obs_rows: dict[str, list[np.ndarray]] = {}
     actions: list[np.ndarray] = []
     episode: list[int] = []
     kept = 0
-    bar = tqdm(range(cfg.episodes), desc="demonstrations", disable=not progress, unit="ep")
+    bar = tqdm(seeds, desc=desc, disable=not progress, unit="ep")
     try:
-        for i in bar:
+        for i, seed in enumerate(bar):
             env = envs[i % len(envs)]
             picker = ScriptedPicker.for_env(env)
-            obs, _ = env.reset(seed=cfg.seed + i)
+            expert_acts = actor is None or rng.random() < beta
+            obs, _ = env.reset(seed=seed)
             ep_obs, ep_act = [], []
-            done = False
+            done, sealed = False, False
             while not done:
                 clean = picker(obs)
-                noisy = clean.copy()
-                noisy[:6] += rng.normal(0.0, cfg.action_noise, 6).astype(np.float32)
-                ep_obs.append(obs)
-                ep_act.append(clean)
-                obs, _, terminated, truncated, info = env.step(np.clip(noisy, -1, 1))
+                sealed |= bool(obs["suction"][1] > 0.5)
+                if expert_acts:
+                    act = clean.copy()
+                    act[:6] += rng.normal(0.0, cfg.action_noise, 6).astype(np.float32)
+                else:
+                    act = actor(obs)
+                if expert_acts or picker.phase != "lift" or sealed:
+                    ep_obs.append(obs)
+                    ep_act.append(clean)
+                obs, _, terminated, truncated, info = env.step(np.clip(act, -1, 1))
                 done = terminated or truncated
-            if info["is_success"]:
+            if info["is_success"] or not expert_acts:
                 kept += 1
                 for o in ep_obs:
                     for k, v in o.items():
                         obs_rows.setdefault(k, []).append(np.asarray(v, np.float32))
                 actions += ep_act
-                episode += [i] * len(ep_act)
+                episode += [seed] * len(ep_act)
             bar.set_postfix(kept=kept)
     finally:
         for env in envs:
@@ -154,26 +184,40 @@ def collect_demonstrations(cfg: BCConfig, progress: bool = True) -> dict[str, np
     return out
 
 
+def collect_demonstrations(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
+    """The scripted picker's successful episodes (DART noise), seeds ``cfg.seed ..``."""
+    return _rollouts(cfg, range(cfg.seed, cfg.seed + cfg.episodes), progress=progress)
+
+
 def _save_npz_atomic(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
     tmp = path.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays)
     os.replace(tmp, path)
 
 
-def load_or_collect(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
-    """``out/demos.npz`` if it was made with the same demonstration settings, else collected anew."""
-    path = Path(cfg.out) / "demos.npz"
+def _load_or_make(path: Path, meta: dict[str, Any], make: Any) -> dict[str, np.ndarray]:
+    """``path``'s arrays if it was written with ``meta``, else ``make()``'s, saved there."""
     if path.exists():
         try:
             with np.load(path) as z:
-                if json.loads(str(z["__meta__"])) == cfg.demo_settings():
+                if json.loads(str(z["__meta__"])) == meta:
                     return {k: z[k] for k in z.files if k != "__meta__"}
         except (OSError, ValueError, KeyError):
-            pass  # unreadable or from an interrupted write: collect again
-    demos = collect_demonstrations(cfg, progress)
+            pass  # unreadable or from an interrupted write: make it again
+    arrays = make()
     path.parent.mkdir(parents=True, exist_ok=True)
-    _save_npz_atomic(path, demos, cfg.demo_settings())
-    return demos
+    _save_npz_atomic(path, arrays, meta)
+    return arrays
+
+
+def load_or_collect(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
+    """``out/demos.npz`` if it was made with the same demonstration settings, else collected anew."""
+    return _load_or_make(Path(cfg.out) / "demos.npz", cfg.demo_settings(),
+                         lambda: collect_demonstrations(cfg, progress))
+
+
+def _concat(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    return {k: np.concatenate([a[k], b[k]]) for k in a}
 
 
 def flat_observations(demos: dict[str, np.ndarray], keys: list[str]) -> np.ndarray:
@@ -259,6 +303,20 @@ def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
             env.close()
         losses = behaviour_clone(model, demos, cfg.epochs, cfg.batch_size, cfg.learning_rate,
                                  cfg.seed, progress)
+        data = demos
+        for r in range(1, cfg.dagger_rounds + 1):
+            def actor(obs: dict[str, np.ndarray]) -> np.ndarray:
+                return model.predict(obs, deterministic=True)[0]
+
+            first = cfg.seed + 100_000 * r  # disjoint from the demonstrations and evaluations
+            labelled = _load_or_make(
+                Path(cfg.out) / f"dagger_{r}.npz", cfg.dagger_settings(r),
+                lambda first=first, actor=actor, r=r: _rollouts(
+                    cfg, range(first, first + cfg.dagger_episodes), actor, beta=0.5**r,
+                    desc=f"DAgger round {r}", progress=progress))
+            data = _concat(data, labelled)
+            losses += behaviour_clone(model, data, cfg.dagger_epochs, cfg.batch_size,
+                                      cfg.learning_rate, cfg.seed + r, progress)
         wall = time.perf_counter() - t0
     finally:
         torch.set_num_threads(threads)
@@ -269,7 +327,8 @@ def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
     (out / "config.json").write_text(json.dumps(config, indent=2))
     summary = {"recipe": "bc", "demo_episodes": cfg.episodes,
                "demo_episodes_kept": int(len(np.unique(demos["episode"]))),
-               "demo_steps": int(len(demos["actions"])), "final_loss": losses[-1],
+               "demo_steps": int(len(demos["actions"])), "dagger_rounds": cfg.dagger_rounds,
+               "training_steps": int(len(data["actions"])), "final_loss": losses[-1],
                "demo_wall_s": round(t_demo, 1), "wall_s": round(wall, 1),
                "model": str(out / "model.zip")}
     (out / "summary.json").write_text(json.dumps(summary, indent=2))

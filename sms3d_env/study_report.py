@@ -134,7 +134,8 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     top.set_ylim(0, 105)
     top.grid(alpha=0.3)
     top.legend(fontsize=8, loc="lower left")
-    top.set_title("Scripted suction picker: success vs orientation error")
+    pickers = sorted({r.get("picker", "scripted") for r in rows})
+    top.set_title(f"{', '.join(pickers).capitalize()} suction picker: success vs orientation error")
     default = [r for r in table if r["variant"] == "default"]
     causes = sorted({c for r in default for c in r["causes"]})
     bottom_acc = np.zeros(len(default))
@@ -149,6 +150,34 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     bottom.grid(alpha=0.3)
     if causes:
         bottom.legend(fontsize=8)
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    plt.close(fig)
+    write_atomic(Path(path), buffer.getvalue())
+
+
+def plot_pickers(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path) -> None:
+    """Success vs orientation error, one line per picker (default physics, noisy source, 95 %
+    Wilson intervals): the sweeps of several pickers on the same seeded episodes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for label, rows in curves.items():
+        sub = [r for r in success_table(rows) if r["variant"] == "default"]
+        x = [r["error_deg"] for r in sub]
+        y = [100 * r["success"] for r in sub]
+        err = [[100 * (r["success"] - r["ci_low"]) for r in sub], [100 * (r["ci_high"] - r["success"]) for r in sub]]
+        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=f"{label} (n = {min(r['n'] for r in sub)}/error)")
+    ax.set_xlabel("orientation error θ (degrees, rotation perpendicular to the stem)")
+    ax.set_ylabel("pick success (%)")
+    ax.set_ylim(0, 105)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    ax.set_title("Pickers on the same seeded episodes: success vs orientation error")
     fig.tight_layout()
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=120)

@@ -499,7 +499,8 @@ def _cmd_train_bc(args: Any) -> int:
     try:
         cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
                        pose_error_deg=args.pose_error_deg, seed=args.seed, out=args.out,
-                       num_mushrooms=tuple(args.demo_mushrooms))
+                       num_mushrooms=tuple(args.demo_mushrooms), dagger_rounds=args.dagger_rounds,
+                       dagger_episodes=args.dagger_episodes)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -560,7 +561,9 @@ def register(subparsers: Any) -> None:
     bc.add_argument("--demo-episodes", type=int, default=400, help="scripted episodes (failures dropped)")
     bc.add_argument("--demo-mushrooms", type=int, nargs="+", default=[10, 25], help="bed sizes cycled through")
     bc.add_argument("--action-noise", type=float, default=0.2, help="DART noise on the twist while collecting")
-    bc.add_argument("--epochs", type=int, default=40)
+    bc.add_argument("--epochs", type=int, default=40, help="epochs of the first clone")
+    bc.add_argument("--dagger-rounds", type=int, default=3, help="DAgger rounds after it (0: plain BC)")
+    bc.add_argument("--dagger-episodes", type=int, default=150, help="episodes per DAgger round")
     p.set_defaults(func=_cmd_train)
 
     e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "

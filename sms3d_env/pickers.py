@@ -1,0 +1,61 @@
+"""Pickers by name, for the study and the benchmarks: ``"scripted"``, ``"policy[:PATH]"`` (a
+saved SB3 policy; no path: the shipped one) or ``"residual:PATH"`` (a residual policy on top of
+the scripted picker).
+
+A learned picker runs on the env id and options it was trained with (``config.json`` beside the
+model), so ``make_picker_env`` builds that env; every reset draws the same scene, target and pose
+estimate from the same seed whatever the picker (the options change the episode, not its draw),
+which keeps the study's design paired.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+PICKER_KINDS = ("scripted", "policy", "residual")
+
+
+@dataclass(frozen=True)
+class PickerSpec:
+    """``kind`` in ``PICKER_KINDS``; ``path`` the model (None: the shipped policy)."""
+
+    kind: str = "scripted"
+    path: str | None = None
+
+    @property
+    def label(self) -> str:
+        if self.kind == "scripted":
+            return "scripted"
+        return f"{self.kind}:{Path(self.path).parent.name}" if self.path else self.kind
+
+
+def parse_picker(text: str) -> PickerSpec:
+    """``"scripted"``, ``"policy"``, ``"policy:PATH"`` or ``"residual:PATH"`` (ValueError naming
+    the picker otherwise; a missing model file raises FileNotFoundError)."""
+    kind, _, path = str(text).partition(":")
+    if kind not in PICKER_KINDS:
+        raise ValueError(f"picker must be one of {PICKER_KINDS} (policy/residual with :PATH), got {text!r}")
+    if kind == "scripted" and path:
+        raise ValueError(f"the scripted picker takes no model path, got {text!r}")
+    if kind == "residual" and not path:
+        raise ValueError("picker 'residual' needs the model: residual:PATH/model.zip")
+    if path and not Path(path).is_file():
+        raise FileNotFoundError(f"picker model not found: {path}")
+    return PickerSpec(kind, path or None)
+
+
+def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
+    """``(env, picker)``: the env the picker was trained on (``env_kwargs`` added) and the picker,
+    a callable ``obs -> action``."""
+    from sms3d_env.training import SHIPPED_POLICY, PolicyActor, _make_env
+
+    if spec.kind == "scripted":
+        from sms3d_env.scripted_picker import ScriptedPicker
+
+        env = _make_env("SMS3DPick-v0", **env_kwargs)
+        return env, ScriptedPicker.for_env(env)
+    actor = PolicyActor(spec.path or SHIPPED_POLICY)
+    env = _make_env(actor.env_id, actor.residual_scale, **{**env_kwargs, **actor.env_options})
+    return env, actor
