@@ -17,9 +17,11 @@ REWARD_TYPES = ("dense", "sparse", "staged")
 # detached and held); success pays 1, the per-step maximum.
 STAGE_FLOORS = {"approach": 0.0, "sealed": 0.4, "detached": 0.6}
 APPROACH_WEIGHT, ROOT_WEIGHT, LIFT_WEIGHT = 0.3, 0.2, 0.3
-# tanh scales: 5 mm from the cap top leaves 10 % of the reach term; 5 degrees off the axis 25 %
-# of the alignment term (the seal cone is 20 degrees: the term is steep inside it).
-REACH_SCALE = 20.0  # 1/m
+# tanh scales. Reach: the mean of a coarse term (5/m, still sloped 20 cm away, where the arm
+# starts) and a fine one (30/m: 5 mm from the cap top costs 14 % of it), so that the reward is
+# steep where precision matters without going flat far away. Alignment: 5 degrees off the axis
+# costs 25 % (the seal cone is 20 degrees: the term is steep inside it).
+REACH_SCALES = (5.0, 30.0)  # 1/m
 ALIGN_SCALE = 3.0  # 1/rad
 
 
@@ -76,8 +78,9 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     | detached | holding the detached target | 0.6 + 0.3 x lift fraction |
     | success | detached, held, lifted | 1 + ``steps_left`` |
 
-    reach = 1 - tanh(20/m x distance from the tool to the *estimated* cap top); align = 1 -
-    tanh(3/rad x angle between the cup axis and the estimated stem axis, reversed). Per step the
+    reach = 1 - mean(tanh(5/m x d), tanh(30/m x d)), d the distance from the tool to the
+    *estimated* cap top; align = 1 - tanh(3/rad x angle between the cup axis and the estimated
+    stem axis, reversed). Per step the
     reward is at most 1, reached only at success; the success step also pays ``steps_left`` (the
     return of holding that maximum until the time limit), so finishing early is never worth less
     than loitering in a stage below it. A bruise pays 0 (it ends the episode). The root load is
@@ -93,7 +96,8 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     if s.gripped_target:
         load = min(max(s.root_utilisation, 0.0), 1.0)
         return {"stage": STAGE_FLOORS["sealed"], "progress": ROOT_WEIGHT * load, "success_bonus": 0.0}
-    reach = 1.0 - math.tanh(REACH_SCALE * math.dist(s.tool_pos, s.est_cap_top))
+    d = math.dist(s.tool_pos, s.est_cap_top)
+    reach = 1.0 - sum(math.tanh(k * d) for k in REACH_SCALES) / len(REACH_SCALES)
     cos = float(np.clip(-(s.tool_axis @ s.est_axis) / np.linalg.norm(s.est_axis), -1.0, 1.0))
     align = 1.0 - math.tanh(ALIGN_SCALE * math.acos(cos))
     return {"stage": STAGE_FLOORS["approach"], "progress": APPROACH_WEIGHT * reach * align,

@@ -58,6 +58,8 @@ class TrainConfig:
             learnable options: latched suction, staged reward, dead-end episode end, task
             observations; ``reward_type`` is then ignored and must stay at its default).
         normalize: standardise observations with running statistics (``VecNormalize``).
+        scene_pool: > 0: each env draws its beds from a pool of this many (the env's
+            ``scene_pool``; resets then cost physics, not placement and compilation).
         residual_scale: > 0 trains a residual on top of the scripted picker
             (:class:`sms3d_env.residual.ResidualPicker` with this scale); 0: the policy acts alone.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
@@ -78,6 +80,7 @@ class TrainConfig:
     algo: str = "ppo"
     env_id: str = "SMS3DPick-v0"
     normalize: bool = False
+    scene_pool: int = 0
     residual_scale: float = 0.0
     pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
@@ -136,7 +139,7 @@ class TrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise bad(name, "must be an integer >= 1")
-        for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose"):
+        for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose", "scene_pool"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise bad(name, "must be an integer >= 0")
@@ -169,6 +172,8 @@ class TrainConfig:
 
             kw.pop("pose_error_deg")
             kw["pose_source"] = UniformNoisyPose(*self.pose_error_range_deg)
+        if self.scene_pool:
+            kw["scene_pool"] = self.scene_pool
         return {"env_id": self.env_id, "residual_scale": self.residual_scale, **kw}
 
     @classmethod
@@ -296,7 +301,9 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
         callbacks: list[Any] = []
         if cfg.eval_freq > 0:
             # Periodic evaluation under the training pose condition (fixed seeds).
-            eval_env = _vec_env(cfg.env_kwargs(), 1, cfg.seed + 10_000, None)
+            # Fresh beds, not the training pool's.
+            eval_kw = {k: v for k, v in cfg.env_kwargs().items() if k != "scene_pool"}
+            eval_env = _vec_env(eval_kw, 1, cfg.seed + 10_000, None)
             if cfg.normalize:
                 # EvalCallback copies the training statistics into it before each evaluation.
                 eval_env = _normalized(eval_env, training=False)
@@ -477,7 +484,7 @@ def _cmd_train(args: Any) -> int:
     residual = args.recipe == "residual"
     try:
         cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v0" if residual else args.env_id,
-                          normalize=args.normalize or residual,
+                          normalize=args.normalize or residual, scene_pool=args.scene_pool,
                           residual_scale=args.residual_scale if residual else 0.0,
                           pose_error_range_deg=args.pose_error_range,
                           total_steps=args.steps, max_wall_s=args.max_wall_s,
@@ -538,6 +545,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--env-id", choices=ENV_IDS, default=defaults.env_id,
                    help="SMS3DPickTrain-v0: the learnable options (latched suction, staged reward, ...)")
     p.add_argument("--normalize", action="store_true", help="standardise observations (VecNormalize)")
+    p.add_argument("--scene-pool", type=int, default=defaults.scene_pool,
+                   help="draw training beds from a pool of this many (0: a new bed per reset)")
     p.add_argument("--steps", type=int, default=defaults.total_steps, help="total env steps")
     p.add_argument("--max-wall-s", type=float, default=None, help="stop after this many seconds")
     p.add_argument("--n-envs", type=int, default=defaults.n_envs, help="parallel envs (SubprocVecEnv if > 1)")
