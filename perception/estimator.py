@@ -1,8 +1,12 @@
 """Inference wrapper: one camera-frame point cloud → rotation, stem axis and centre.
 
 ``PoseEstimator.estimate`` raises :class:`~perception.errors.NoEstimate` when fewer than
-``min_points`` finite points remain (empty masks, NaN depth); ``estimate_or_none`` returns
-``None`` instead. It never returns NaN.
+``min_points`` finite points remain (empty masks, NaN depth), and its subclass
+:class:`~perception.errors.DegenerateCloud` when the points are all at one place or on one line
+(they fix no orientation, though the network would answer); ``estimate_or_none`` returns
+``None`` for both. It never returns NaN. Clouds are in metres in the camera frame: one whose
+median depth is no plausible distance in metres (millimetres, say) is refused with
+:class:`~perception.errors.PipelineInputError`, by the check ``PosePipeline`` makes of its depth.
 
 Clouds larger than the network's ``num_points`` are subsampled: with ``sampling="random"`` (the
 default, fast) each call draws from the estimator's seeded generator, so repeated calls on the
@@ -45,6 +49,8 @@ from perception.pointcloud import (
     MIN_POINTS,
     PreparedCloud,
     SamplingMethod,
+    check_metres,
+    check_sampling,
     prepare_cloud,
     to_tensor,
 )
@@ -87,6 +93,7 @@ class PoseEstimator:
         for name, value in (("views", views), ("workers", workers)):
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise PerceptionConfigError(name, f"must be an int >= 1, got {value!r}")
+        check_sampling(sampling, "sampling")
         self.model = model.to(device).eval()
         self.views = views
         self.workers = workers
@@ -116,7 +123,9 @@ class PoseEstimator:
         """Estimate one mushroom's pose from its ``(N, 3)`` camera-frame points.
 
         Raises:
-            NoEstimate: fewer than ``min_points`` finite points.
+            NoEstimate: fewer than ``min_points`` finite points; ``DegenerateCloud`` (a
+                ``NoEstimate``): all at one place or on one line.
+            PipelineInputError: depths that are not metres.
             ValueError: wrong shapes, or colours missing for an RGB network.
         """
         return self.estimate_batch([points_cam], None if colors is None else [colors])[0]
@@ -156,7 +165,8 @@ class PoseEstimator:
         self, clouds: Sequence[np.ndarray], colors: Sequence[np.ndarray | None] | None = None
     ) -> list[Estimate]:
         """Estimate several mushrooms in one forward pass (raises :class:`NoEstimate` if any
-        cloud is too small; filter with :meth:`estimate_or_none` per cloud if that can happen)."""
+        cloud is too small or degenerate; filter with :meth:`estimate_or_none` per cloud if that
+        can happen)."""
         if self.config.use_rgb and colors is None:
             raise ValueError("colors: this network uses RGB; pass colours for every cloud")
         prepared = [
@@ -173,6 +183,8 @@ class PoseEstimator:
         ]
         if not prepared:
             return []
+        for i, p in enumerate(clouds):  # shapes checked by prepare_cloud
+            check_metres(np.asarray(p)[:, 2], f"clouds[{i}] z")
         turns = np.tile(self._turns, (len(clouds), 1, 1))
         R = self._passes(prepared, turns).reshape(len(clouds), self.views, 3, 3)
         if self.upright_pass:

@@ -10,12 +10,9 @@ import numpy as np
 
 from generator.camera import Intrinsics
 from perception.detector import Detection, Detector
+from perception.errors import NoEstimate, PipelineInputError
 from perception.estimator import PoseEstimator
-from perception.pointcloud import depth_to_points
-
-# Planar depth of a bed seen from 7 cm to 2 m: a median outside this range is the wrong unit.
-PLAUSIBLE_DEPTH_M = (0.05, 3.0)
-
+from perception.pointcloud import check_cloud, check_metres, depth_to_points, pinhole_intrinsics
 
 #: Cap-top band: points within this distance (m) below the cloud's top along the stem axis.
 CAP_TOP_BAND_M = 1e-3
@@ -37,10 +34,6 @@ def estimate_cap_top(points: np.ndarray, axis: np.ndarray) -> np.ndarray:
     top = np.percentile(heights, CAP_TOP_PERCENTILE)
     band = heights >= top - CAP_TOP_BAND_M
     return points[band].mean(0) + axis * (top - heights[band].mean())
-
-
-class PipelineInputError(ValueError):
-    """An input the pipeline cannot use (shape, dtype, unit, intrinsics); the message says which."""
 
 
 @dataclass(frozen=True)
@@ -65,8 +58,11 @@ class MushroomEstimate:
         return self.rotation_world[:, 2].copy()
 
 
-def check_inputs(rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, world_from_camera: np.ndarray) -> None:
-    """Raise ``PipelineInputError`` for inputs that would otherwise fail deep inside torch."""
+def check_inputs(rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics | np.ndarray,
+                 world_from_camera: np.ndarray) -> None:
+    """Raise ``PipelineInputError`` for inputs that would otherwise fail deep inside torch, and
+    ``PerceptionConfigError`` naming the field for intrinsics that are no pinhole camera
+    (``pinhole_intrinsics``; a 3x3 ``K`` is one, without an image size to compare)."""
     rgb, depth = np.asarray(rgb), np.asarray(depth)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise PipelineInputError(f"rgb: expected (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
@@ -74,15 +70,11 @@ def check_inputs(rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, wor
         raise PipelineInputError(f"depth: shape {depth.shape} differs from the image's {rgb.shape[:2]}")
     if not np.issubdtype(depth.dtype, np.floating):
         raise PipelineInputError(f"depth: expected float metres, got {depth.dtype} (divide millimetres by 1000)")
-    if (intrinsics.width, intrinsics.height) != (rgb.shape[1], rgb.shape[0]):
+    pinhole_intrinsics(intrinsics)
+    if hasattr(intrinsics, "width") and (intrinsics.width, intrinsics.height) != (rgb.shape[1], rgb.shape[0]):
         raise PipelineInputError(f"intrinsics are for {intrinsics.width}x{intrinsics.height}, the image is "
                                  f"{rgb.shape[1]}x{rgb.shape[0]}")
-    valid = depth[np.isfinite(depth) & (depth > 0)]
-    if valid.size:
-        median = float(np.median(valid))
-        if not PLAUSIBLE_DEPTH_M[0] <= median <= PLAUSIBLE_DEPTH_M[1]:
-            raise PipelineInputError(f"depth: median {median:.3g} is not a plausible distance in metres "
-                                     f"(expected {PLAUSIBLE_DEPTH_M[0]}-{PLAUSIBLE_DEPTH_M[1]} m); wrong unit?")
+    check_metres(depth, "depth")
     pose = np.asarray(world_from_camera, dtype=float)
     if pose.shape != (4, 4) or not np.allclose(pose[:3, :3].T @ pose[:3, :3], np.eye(3), atol=1e-6):
         raise PipelineInputError("world_from_camera: expected a 4 x 4 rigid transform")
@@ -122,11 +114,12 @@ class PosePipeline:
         self.erode_px = erode_px
         self.soil_margin_m = soil_margin_m
 
-    def __call__(self, rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics, world_from_camera: np.ndarray,
-                 detections: list[Detection] | None = None) -> list[MushroomEstimate]:
+    def __call__(self, rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics | np.ndarray,
+                 world_from_camera: np.ndarray, detections: list[Detection] | None = None) -> list[MushroomEstimate]:
         """Estimates for every detection with enough valid points (others are left out: a
-        too-small or empty mask gives no estimate, never NaN). Pass ``detections`` to skip the
-        detector (e.g. oracle masks from ``detections_from_labels``)."""
+        too-small or empty mask, or one whose points lie on a line, gives no estimate, never
+        NaN). Pass ``detections`` to skip the detector (e.g. oracle masks from
+        ``detections_from_labels``); ``intrinsics`` may be a 3x3 camera matrix."""
         check_inputs(rgb, depth, intrinsics, world_from_camera)
         if detections is None:
             if self.detector is None:
@@ -140,14 +133,16 @@ class PosePipeline:
             if self.soil_margin_m is not None:
                 mask = above_soil(mask, depth, self.soil_margin_m)
             points, colors = depth_to_points(depth, intrinsics, mask, rgb)
-            if len(points) < self.estimator.min_points:
+            try:
+                check_cloud(points, self.estimator.min_points)
+            except NoEstimate:
                 continue
             clouds.append(points.astype(np.float64))
             colours.append(colors)
             kept.append(det)
         if not clouds:
             return []
-        # Every cloud has enough points (checked above), so this raises no NoEstimate.
+        # Every cloud passed check_cloud above, so this raises no NoEstimate.
         estimates = self.estimator.estimate_batch(clouds, colours if self.estimator.config.use_rgb else None)
         rot, trans = world_from_camera[:3, :3], world_from_camera[:3, 3]
         results = []

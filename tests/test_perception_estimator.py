@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from perception.errors import NoEstimate, PerceptionConfigError
+from perception.errors import DegenerateCloud, NoEstimate, PerceptionConfigError, PipelineInputError
 from perception.estimator import PoseEstimator, default_weights_path, turn_to_camera
 from perception.pointcloud import depth_to_points
 from perception.synthetic_views import ViewConfig, default_models, generate_samples
@@ -62,6 +62,29 @@ def test_too_few_points_gives_no_estimate(estimator: PoseEstimator) -> None:
     assert info.value.num_points == 7
     assert estimator.estimate_or_none(pts) is None
     assert estimator.estimate_or_none(np.zeros((0, 3))) is None
+
+
+def test_identical_or_collinear_points_give_no_estimate(estimator: PoseEstimator) -> None:
+    # Both gave a "confident" rotation (a stem axis straight at the camera).
+    same = np.tile([0.01, 0.02, 0.4], (500, 1))
+    line = np.column_stack((np.linspace(-0.02, 0.02, 500), np.zeros(500), np.full(500, 0.4)))
+    for cloud in (same, line):
+        with pytest.raises(DegenerateCloud, match="degenerate cloud: 500 points"):
+            estimator.estimate(cloud)
+        assert estimator.estimate_or_none(cloud) is None
+
+
+def test_clouds_in_millimetres_are_refused(estimator: PoseEstimator) -> None:
+    # A cloud in millimetres got an estimate with its centre in millimetres.
+    s = generate_samples(1, seed=5, models=default_models(model_ids=(6,)))[0]
+    with pytest.raises(PipelineInputError, match=r"clouds\[1\] z: median 3\d\d is not a plausible distance in metres"):
+        estimator.estimate_batch([s.points, s.points * 1000.0])
+
+
+def test_an_unknown_sampling_method_is_refused(estimator: PoseEstimator) -> None:
+    # "bogus" quietly ran farthest-point sampling on clouds larger than the network's input.
+    with pytest.raises(PerceptionConfigError, match=r"sampling: must be one of \('random', 'fps'\)"):
+        PoseEstimator(estimator.model, sampling="bogus")
 
 
 @pytest.mark.parametrize("upright_pass", [False, True])

@@ -4,14 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from perception.errors import NoEstimate, PerceptionConfigError
+from generator.camera import Intrinsics as CameraIntrinsics
+from perception.errors import DegenerateCloud, NoEstimate, PerceptionConfigError
 from perception.pointcloud import (
     MIN_POINTS,
+    MIN_SPREAD_M,
     Intrinsics,
     depth_to_points,
     farthest_point_indices,
     normalize_points,
+    pinhole_intrinsics,
     prepare_cloud,
     sample_points,
 )
@@ -99,3 +104,58 @@ def test_normalise_round_trip() -> None:
 def test_intrinsics_validation_names_field() -> None:
     with pytest.raises(PerceptionConfigError, match="fy"):
         Intrinsics(400.0, -1.0, 0.0, 0.0)
+
+
+def test_a_3x3_camera_matrix_is_accepted_as_intrinsics() -> None:
+    depth = np.random.default_rng(3).uniform(0.3, 0.5, (48, 64))
+    np.testing.assert_array_equal(depth_to_points(depth, K.matrix())[0], depth_to_points(depth, K)[0])
+    assert pinhole_intrinsics(K.matrix().tolist()) == K
+    assert pinhole_intrinsics(CameraIntrinsics(64, 48, 400.0, 380.0, 32.0, 24.0)) == K
+    for bad in (np.eye(4), np.array([[400.0, 1.0, 32.0], [0.0, 380.0, 24.0], [0.0, 0.0, 1.0]]), "K", None):
+        with pytest.raises(PerceptionConfigError, match="intrinsics"):
+            depth_to_points(depth, bad)
+
+
+_FIELDS = ("fx", "fy", "cx", "cy")
+_BAD_FOCAL = st.one_of(st.sampled_from([float("nan"), float("inf"), -float("inf"), 0.0]),
+                       st.floats(max_value=0.0, allow_nan=False))
+_NOT_FINITE = st.sampled_from([float("nan"), float("inf"), -float("inf")])
+
+
+@given(st.sampled_from(_FIELDS).flatmap(lambda f: st.tuples(st.just(f), _BAD_FOCAL if f in ("fx", "fy") else _NOT_FINITE)),
+       st.sampled_from(["camera", "matrix"]))
+def test_intrinsics_that_are_not_finite_or_not_positive_are_named(field_and_value, given_as) -> None:
+    # fx = NaN or 0 used to turn every point into NaN: "too few valid points", not a word on fx.
+    field, value = field_and_value
+    values = dict(zip(_FIELDS, (400.0, 380.0, 32.0, 24.0)), **{field: value})
+    camera = CameraIntrinsics(64, 48, **values)
+    with pytest.raises(PerceptionConfigError) as info:
+        depth_to_points(np.full((48, 64), 0.4), camera if given_as == "camera" else camera.matrix)
+    assert info.value.field == field
+
+
+@given(st.integers(MIN_POINTS, 600), st.floats(-0.1, 0.1), st.floats(0.1, 1.0),
+       st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(-1, 1)).filter(lambda d: np.linalg.norm(d) > 0.1),
+       st.floats(0.0, 0.1))
+def test_points_at_one_place_or_on_one_line_are_degenerate(n, x, z, direction, length) -> None:
+    # 500 identical or collinear points gave a confident rotation.
+    t = np.linspace(-0.5, 0.5, n)[:, None]
+    line = np.array([x, 0.0, z]) + t * length * np.asarray(direction) / np.linalg.norm(direction)
+    with pytest.raises(DegenerateCloud) as info:
+        prepare_cloud(line, 64, np.random.default_rng(0))
+    assert info.value.num_points == n and info.value.spread_m < MIN_SPREAD_M
+    assert isinstance(info.value, NoEstimate) and "degenerate" in str(info.value)
+
+
+def test_a_thin_but_two_dimensional_cloud_is_not_degenerate() -> None:
+    rng = np.random.default_rng(4)
+    strip = np.column_stack((rng.uniform(-0.02, 0.02, 200), rng.uniform(-0.001, 0.001, 200), np.full(200, 0.4)))
+    assert prepare_cloud(strip, 64, rng).num_valid == 200
+
+
+def test_an_unknown_sampling_method_is_named_with_the_choices() -> None:
+    rng = np.random.default_rng(5)
+    pts = rng.normal(size=(100, 3))
+    for n in (64, 200):  # with enough points "bogus" quietly ran farthest-point sampling
+        with pytest.raises(PerceptionConfigError, match=r"method: must be one of \('random', 'fps'\), got 'bogus'"):
+            sample_points(pts, n, rng, "bogus")

@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -5,6 +7,7 @@ from generator import SceneConfig, generate_scene
 from generator.camera import project
 from generator.dataset.render import SceneRenderer
 from perception.detector import Detection, detections_from_labels
+from perception.errors import PerceptionConfigError
 from perception.estimator import PoseEstimator
 from perception.eval_pipeline import GroundTruthMushroom, match
 from perception.pipeline import (
@@ -87,6 +90,40 @@ def test_bad_inputs_are_named(frame_and_scene, pipeline):
         pipeline(frame.rgb, frame.depth, frame.intrinsics, np.eye(3), [])
     with pytest.raises(ValueError, match="detector"):
         pipeline(*args[:4])
+
+
+def test_a_camera_matrix_works_as_intrinsics(frame_and_scene, pipeline):
+    # A 3 x 3 K was an AttributeError ('numpy.ndarray' object has no attribute 'width').
+    frame, _ = frame_and_scene
+    detections = detections_from_labels(frame.labels_mushroom)
+    args = (frame.rgb, frame.depth)
+    with_k = pipeline(*args, frame.intrinsics.matrix, frame.world_from_camera, detections)
+    plain = pipeline(*args, frame.intrinsics, frame.world_from_camera, detections)
+    assert len(with_k) == len(plain) > 3
+    for a, b in zip(with_k, plain):
+        assert a.num_points == b.num_points
+        np.testing.assert_allclose(a.centre_world, b.centre_world)
+
+
+@pytest.mark.parametrize("fx", [float("nan"), 0.0, -380.0])
+def test_a_bad_focal_length_is_named(frame_and_scene, pipeline, fx):
+    # fx NaN or 0 gave NaN points and "no estimate: too few valid points".
+    frame, _ = frame_and_scene
+    bad = dataclasses.replace(frame.intrinsics, fx=fx)
+    detections = detections_from_labels(frame.labels_mushroom)
+    for intrinsics in (bad, bad.matrix):
+        with pytest.raises(PerceptionConfigError, match="fx: must be"):
+            pipeline(frame.rgb, frame.depth, intrinsics, frame.world_from_camera, detections)
+
+
+def test_a_mask_whose_points_lie_on_a_line_gives_no_estimate(frame_and_scene, pipeline):
+    # One row of pixels on a flat surface seen square on: collinear points, which the network
+    # would turn into a confident rotation.
+    frame, _ = frame_and_scene
+    labels = np.zeros(frame.depth.shape, np.uint16)
+    labels[100, 100:140] = 1
+    flat = np.full(frame.depth.shape, 0.4, np.float32)
+    assert pipeline(frame.rgb, flat, frame.intrinsics, frame.world_from_camera, detections_from_labels(labels)) == []
 
 
 def test_above_soil_trims_a_mask_that_spills_onto_the_soil():
