@@ -22,3 +22,16 @@ def test_env_reads_scenes_from_a_dataset_folder(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(Exception, match="manifest"):
         gym.make("SMS3DPick-v0", scenes=str(tmp_path / "empty"))
+
+
+def test_env_refuses_a_dataset_scene_whose_checksum_differs(tmp_path):
+    from generator.dataset.errors import CorruptFileError
+
+    out = tmp_path / "beds"
+    assert sms3d(["generate", "--out", str(out), "--num-scenes", "1", "--num-mushrooms", "4",
+                  "--workers", "1", "--seed", "5"]) == 0
+    scene_json = next(out.glob("*/scene.json"))
+    scene_json.write_text(scene_json.read_text().replace('"species"', ' "species"', 1))
+    with pytest.raises(CorruptFileError, match="scene.json"):
+        gym.make("SMS3DPick-v0", scenes=str(out))
+    assert len(load_scenes(out, verify=False)) == 1  # an explicit opt-out still reads it

@@ -225,16 +225,26 @@ class InstancePointCloudDataset(Dataset):
         }
 
 
-def load_scene(root: str | Path, index: int) -> Scene:
-    """The ``Scene`` of scene ``index`` (``SceneFormatError`` reported as ``CorruptFileError``)."""
-    path = Path(root) / scene_dirname(index) / "scene.json"
+def load_scene(root: str | Path, index: int, verify: bool = True) -> Scene:
+    """The ``Scene`` of scene ``index`` (``SceneFormatError`` reported as ``CorruptFileError``);
+    ``verify``: ``CorruptFileError`` unless ``scene.json`` matches its ``DONE`` checksum."""
+    folder = Path(root) / scene_dirname(index)
+    path = folder / "scene.json"
+    if verify:
+        done = folder / DONE
+        if not done.is_file():
+            raise CorruptFileError(done, "missing: the scene was never completed")
+        sums = _json(done, _read_bytes(done))
+        if hashlib.sha256(_read_bytes(path)).hexdigest() != sums.get("scene.json"):
+            raise CorruptFileError(path, "checksum differs from the one recorded in DONE")
     try:
         return Scene.load(path)
     except SceneFormatError as exc:
         raise CorruptFileError(path, str(exc)) from exc
 
 
-def load_scenes(root: str | Path, split: str | None = None) -> list[Scene]:
-    """Every complete scene of a dataset (or of one split), in index order."""
+def load_scenes(root: str | Path, split: str | None = None, verify: bool = True) -> list[Scene]:
+    """Every complete scene of a dataset (or of one split), in index order; ``verify`` checks
+    each ``scene.json`` against the checksum its ``DONE`` records (as ``SceneDataset`` does)."""
     root = Path(root)
-    return [load_scene(root, i) for i in _scene_indices(root, split)]
+    return [load_scene(root, i, verify) for i in _scene_indices(root, split)]
