@@ -19,8 +19,27 @@ SpeciesMix = Literal["white", "brown", "mixed"]
 TiltDistribution = Literal["normal", "half_normal"]
 
 
+# Upper bounds that keep one scene within seconds and a few hundred MiB. 1024 grid points give
+# 0.7 mm soil spacing on the default 0.7 m patch, finer than the ~1 mm a pixel covers at 0.4 m
+# (terrain generation then peaks near 200 MiB; 2048 takes 700 MiB and 100000 would need 74 GiB).
+MAX_TERRAIN_RESOLUTION = 1024
+# Octave 16 at the default lacunarity has a wavelength of microns, and every octave is one more
+# pass over the grid.
+MAX_OCTAVES = 16
+# 100x the paper's M: more only makes a crowded request fail slower.
+MAX_ATTEMPTS = 10_000
+# The largest real modes are 1280 x 720 (D405) and 1920 x 1080 (D435 colour); beyond 4096 the
+# off-screen frame buffers exceed what common GL drivers allocate (100000 fails inside MuJoCo).
+MIN_IMAGE_SIDE, MAX_IMAGE_SIDE = 16, 4096
+
+
+def is_number(value: Any) -> bool:
+    # bool is an int subclass: ``amplitude: true`` must not read as 1.0 m.
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 def _require_finite(name: str, value: float) -> None:
-    if not isinstance(value, (int, float)) or not math.isfinite(value):
+    if not is_number(value) or not math.isfinite(value):
         raise ConfigError(name, f"must be a finite number, got {value!r}")
 
 
@@ -30,11 +49,32 @@ def _require_positive(name: str, value: float) -> None:
         raise ConfigError(name, f"must be > 0, got {value!r}")
 
 
-def _require_range(name: str, lo: float, hi: float, *, positive: bool = True) -> None:
-    for suffix, v in (("[0]", lo), ("[1]", hi)):
+def require_int(name: str, value: Any, lo: int, hi: int | None = None) -> int:
+    """``value`` if it is an integer (not a bool) in ``[lo, hi]``, else ``ConfigError(name)``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo or (hi is not None and value > hi):
+        bounds = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ConfigError(name, f"must be an integer {bounds}, got {value!r}")
+    return value
+
+
+def require_image_side(name: str, value: Any) -> int:
+    """An image width or height in pixels."""
+    return require_int(name, value, MIN_IMAGE_SIDE, MAX_IMAGE_SIDE)
+
+
+def _require_range(name: str, value: Any, *, positive: bool = True) -> tuple[float, float]:
+    """``value`` as a ``(min, max)`` tuple of finite numbers (> 0 if ``positive``)."""
+    try:
+        pair = tuple(value) if not isinstance(value, (str, bytes, Mapping)) else None
+    except TypeError:
+        pair = None
+    if pair is None or len(pair) != 2:
+        raise ConfigError(name, f"must be a pair [min, max], got {value!r}")
+    for suffix, v in zip(("[0]", "[1]"), pair):
         (_require_positive if positive else _require_finite)(name + suffix, v)
-    if lo > hi:
-        raise ConfigError(name, f"min {lo!r} > max {hi!r}")
+    if pair[0] > pair[1]:
+        raise ConfigError(name, f"min {pair[0]!r} > max {pair[1]!r}")
+    return pair
 
 
 @dataclass(frozen=True)
@@ -54,14 +94,12 @@ class TerrainConfig:
     def __post_init__(self) -> None:
         _require_positive("terrain.size_x", self.size_x)
         _require_positive("terrain.size_y", self.size_y)
-        if not isinstance(self.resolution, int) or self.resolution < 2:
-            raise ConfigError("terrain.resolution", f"must be an integer >= 2, got {self.resolution!r}")
+        require_int("terrain.resolution", self.resolution, 2, MAX_TERRAIN_RESOLUTION)
         _require_finite("terrain.amplitude", self.amplitude)
         if self.amplitude < 0:
             raise ConfigError("terrain.amplitude", "must be >= 0")
         _require_positive("terrain.scale", self.scale)
-        if not isinstance(self.octaves, int) or self.octaves < 1:
-            raise ConfigError("terrain.octaves", f"must be an integer >= 1, got {self.octaves!r}")
+        require_int("terrain.octaves", self.octaves, 1, MAX_OCTAVES)
         _require_positive("terrain.persistence", self.persistence)
         _require_positive("terrain.lacunarity", self.lacunarity)
         _require_finite("terrain.base_elevation", self.base_elevation)
@@ -85,30 +123,22 @@ class PlacementConfig:
     insertion_depth: float = 0.002  # m, stem base sunk below the soil surface
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "x_range", tuple(self.x_range))
-        object.__setattr__(self, "y_range", tuple(self.y_range))
-        object.__setattr__(self, "scale_range", tuple(self.scale_range))
-        object.__setattr__(self, "stretch_range", tuple(self.stretch_range))
-        if not isinstance(self.num_mushrooms, int) or not 1 <= self.num_mushrooms <= 100:
-            raise ConfigError("placement.num_mushrooms", f"must be an integer in [1, 100], got {self.num_mushrooms!r}")
+        require_int("placement.num_mushrooms", self.num_mushrooms, 1, 100)
         if self.species not in ("white", "brown", "mixed"):
             raise ConfigError("placement.species", f"must be white, brown or mixed, got {self.species!r}")
-        _require_range("placement.x_range", *self.x_range, positive=False)
-        _require_range("placement.y_range", *self.y_range, positive=False)
+        for name, positive in (("x_range", False), ("y_range", False), ("scale_range", True), ("stretch_range", True)):
+            pair = _require_range(f"placement.{name}", getattr(self, name), positive=positive)
+            object.__setattr__(self, name, pair)
         _require_finite("placement.tilt_std_deg", self.tilt_std_deg)
         if not 0 <= self.tilt_std_deg <= 90:
             raise ConfigError("placement.tilt_std_deg", "must be in [0, 90]")
         if self.tilt_distribution not in ("normal", "half_normal"):
             raise ConfigError("placement.tilt_distribution", "must be normal or half_normal")
-        _require_range("placement.scale_range", *self.scale_range)
-        _require_range("placement.stretch_range", *self.stretch_range)
-        if not isinstance(self.max_attempts, int) or self.max_attempts < 1:
-            raise ConfigError("placement.max_attempts", "must be an integer >= 1")
+        require_int("placement.max_attempts", self.max_attempts, 1, MAX_ATTEMPTS)
         _require_finite("placement.overlap_iou", self.overlap_iou)
         if not 0 <= self.overlap_iou <= 1:
             raise ConfigError("placement.overlap_iou", f"must be in [0, 1], got {self.overlap_iou!r}")
-        if not isinstance(self.neighbours, int) or self.neighbours < 1:
-            raise ConfigError("placement.neighbours", "must be an integer >= 1")
+        require_int("placement.neighbours", self.neighbours, 1, 100)  # more than num_mushrooms can hold
         _require_finite("placement.insertion_depth", self.insertion_depth)
         if not 0 <= self.insertion_depth <= 0.02:
             raise ConfigError("placement.insertion_depth", "must be in [0, 0.02] m")
@@ -129,16 +159,17 @@ class CameraConfig:
     def __post_init__(self) -> None:
         if self.preset not in ("d405", "d435"):
             raise ConfigError("camera.preset", f"must be d405 or d435, got {self.preset!r}")
-        for name in ("width", "height"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or v < 16:
-                raise ConfigError(f"camera.{name}", f"must be an integer >= 16, got {v!r}")
+        require_image_side("camera.width", self.width)
+        require_image_side("camera.height", self.height)
         _require_positive("camera.height_above_soil", self.height_above_soil)
         _require_finite("camera.tilt_deg", self.tilt_deg)
         _require_positive("camera.znear", self.znear)
         _require_positive("camera.zfar", self.zfar)
         if self.znear >= self.zfar:
             raise ConfigError("camera.znear", "must be < camera.zfar")
+
+
+_SECTIONS = {"terrain": TerrainConfig, "placement": PlacementConfig, "camera": CameraConfig}
 
 
 @dataclass(frozen=True)
@@ -150,6 +181,9 @@ class SceneConfig:
     camera: CameraConfig = field(default_factory=CameraConfig)
 
     def __post_init__(self) -> None:
+        for name, section in _SECTIONS.items():
+            if not isinstance(getattr(self, name), section):
+                raise ConfigError(name, f"must be a {section.__name__}, got {type(getattr(self, name)).__name__}")
         p, t = self.placement, self.terrain
         if (p.x_range[0] < -t.size_x / 2 or p.x_range[1] > t.size_x / 2
                 or p.y_range[0] < -t.size_y / 2 or p.y_range[1] > t.size_y / 2):
@@ -169,11 +203,10 @@ class SceneConfig:
         if not isinstance(data, Mapping):
             raise ConfigError("config", f"must be a mapping, got {type(data).__name__}")
         parts: dict[str, Any] = {}
-        sections = {"terrain": TerrainConfig, "placement": PlacementConfig, "camera": CameraConfig}
         for key, value in data.items():
-            if key not in sections:
-                raise ConfigError(key, f"unknown section; expected one of {sorted(sections)}")
-            section = sections[key]
+            if key not in _SECTIONS:
+                raise ConfigError(str(key), f"unknown section; expected one of {sorted(_SECTIONS)}")
+            section = _SECTIONS[key]
             names = {f.name for f in dataclasses.fields(section)}
             if not isinstance(value, Mapping):
                 raise ConfigError(key, "must be a mapping")
@@ -188,15 +221,10 @@ class SceneConfig:
 
     @classmethod
     def from_file(cls, path: str) -> SceneConfig:
-        """Read a YAML or JSON configuration file."""
-        import yaml
+        """Read a YAML or JSON configuration file (see :mod:`generator.config_file`)."""
+        from generator.config_file import read_config_file
 
-        try:
-            with open(path, encoding="utf-8") as fh:
-                data = yaml.safe_load(fh) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise ConfigError(str(path), f"cannot read configuration: {exc}") from exc
-        return cls.from_dict(data)
+        return cls.from_dict(read_config_file(path))
 
     def replace(self, **sections: Any) -> SceneConfig:
         """A copy with whole sections or ``section__field=value`` overrides replaced."""

@@ -12,6 +12,9 @@ class ConfigError(ValueError):
         self.field = field
         self.message = message
 
+    def __reduce__(self):  # picklable across worker processes
+        return (type(self), (self.field, self.message))
+
 
 class MeshError(ValueError):
     """A mushroom mesh that cannot be used (not watertight, no cap, unreadable)."""
