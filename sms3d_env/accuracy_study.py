@@ -1,10 +1,12 @@
-"""How accurate must a mushroom's estimated orientation be for a pick? The pose-error sweep.
+"""How accurate must a mushroom's estimated pose be for a pick? The pose-error sweep.
 
-For each pose error theta, the scripted pose-aware picker runs on the same seeded scenes and
-targets (a paired design: only the error differs), with the ``"noisy"`` pose source rotating the
-oracle pose by exactly theta about a random axis perpendicular to the stem. Results are written
-one part file per task (atomic rename), so a killed sweep resumes where it stopped, and the same
-seed gives the same numbers whatever the number of workers.
+For each orientation error theta (and cap-top position error d, tool and bed size), a picker
+(the scripted pose-aware picker by default) runs on the same seeded scenes and targets (a paired
+design: only the error differs), with the ``"noisy"`` pose source rotating the oracle pose by
+exactly theta about a random axis perpendicular to the stem and moving its cap top by exactly d
+perpendicular to the estimated axis (or along it). Results are written one part file per task
+(atomic rename), so a killed sweep resumes where it stopped, and the same seed gives the same
+numbers whatever the number of workers or the backend (processes or Ray).
 """
 
 from __future__ import annotations
@@ -47,7 +49,10 @@ class SweepConfig:
     errors_deg: tuple[float, ...] = DEFAULT_ERRORS_DEG
     episodes: int = 40
     seed: int = 0
-    num_mushrooms: int = 25
+    num_mushrooms: tuple[int, ...] = (25,)  # bed sizes (an int is one size)
+    position_errors_mm: tuple[float, ...] = (0.0,)  # exact cap-top offsets of the noisy source
+    position_along_axis: bool = False  # offsets along the estimated axis instead of across it
+    tools: tuple[str, ...] = ("suction",)
     variants: tuple[str, ...] = ("default",)
     perception_episodes: int = 0  # episodes with the perception pose source (default physics)
     perception_detector: str | None = None  # a train-detector checkpoint; None: segmentation masks
@@ -64,6 +69,19 @@ class SweepConfig:
         object.__setattr__(self, "errors_deg", tuple(float(e) for e in self.errors_deg))
         if not self.errors_deg or any(not math.isfinite(e) or not 0 <= e <= 180 for e in self.errors_deg):
             raise ConfigError("errors_deg", f"must be angles in [0, 180] degrees, got {self.errors_deg!r}")
+        sizes = (self.num_mushrooms,) if isinstance(self.num_mushrooms, int) else tuple(self.num_mushrooms)
+        object.__setattr__(self, "num_mushrooms", sizes)
+        object.__setattr__(self, "position_errors_mm", tuple(float(e) for e in self.position_errors_mm))
+        object.__setattr__(self, "tools", tuple(self.tools))
+        if not self.position_errors_mm or any(not math.isfinite(e) or not 0 <= e <= 100
+                                              for e in self.position_errors_mm):
+            raise ConfigError("position_errors_mm", f"must be distances in [0, 100] mm, got {self.position_errors_mm!r}")
+        from sms3d_env.robot import TOOLS
+
+        if not self.tools or any(t not in TOOLS for t in self.tools):
+            raise ConfigError("tools", f"must be among {TOOLS}, got {self.tools!r}")
+        if not sizes or any(isinstance(n, bool) or not isinstance(n, int) for n in sizes):
+            raise ConfigError("placement.num_mushrooms", f"must be integers, got {self.num_mushrooms!r}")
         for name, least in (("episodes", 1), ("chunk", 1), ("perception_episodes", 0), ("seed", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < least:
@@ -71,7 +89,8 @@ class SweepConfig:
         unknown = [v for v in self.variants if v not in SENSITIVITY_VARIANTS]
         if unknown:
             raise ConfigError("variants", f"unknown physics variants {unknown}; choose from {sorted(SENSITIVITY_VARIANTS)}")
-        SceneConfig().replace(placement__num_mushrooms=self.num_mushrooms)  # the generator's own range
+        for n in sizes:
+            SceneConfig().replace(placement__num_mushrooms=n)  # the generator's own range
         from sms3d_env.pickers import parse_picker
 
         try:
@@ -86,11 +105,19 @@ class Task:
     error_deg: float  # the noisy source's error; NaN for the perception source (measured instead)
     episode_seeds: tuple[int, ...]
     source: str = "noisy"
+    position_error_mm: float = 0.0
+    tool: str = "suction"
+    num_mushrooms: int = 25
 
     @property
     def name(self) -> str:
+        """The part file's name; the axes added later appear only off their historic values, so
+        folders of earlier sweeps keep their names."""
         error = "perception" if self.source == "perception" else f"e{self.error_deg:g}"
-        return f"{self.variant}_{error}_s{self.episode_seeds[0]}-{self.episode_seeds[-1]}"
+        extra = (f"_p{self.position_error_mm:g}mm" if self.position_error_mm else "") + \
+            (f"_{self.tool}" if self.tool != "suction" else "") + \
+            (f"_n{self.num_mushrooms}" if self.num_mushrooms != 25 else "")
+        return f"{self.variant}_{error}{extra}_s{self.episode_seeds[0]}-{self.episode_seeds[-1]}"
 
 
 def _chunks(first: int, count: int, size: int) -> list[tuple[int, ...]]:
@@ -100,9 +127,12 @@ def _chunks(first: int, count: int, size: int) -> list[tuple[int, ...]]:
 
 def plan_tasks(config: SweepConfig) -> list[Task]:
     chunks = _chunks(config.seed, config.episodes, config.chunk)
-    tasks = [Task(v, e, c) for v in config.variants for e in config.errors_deg for c in chunks]
+    tasks = [Task(v, e, c, "noisy", p, tool, n) for tool in config.tools for n in config.num_mushrooms
+             for v in config.variants for p in config.position_errors_mm for e in config.errors_deg
+             for c in chunks]
     perception = _chunks(config.seed, config.perception_episodes, config.chunk)
-    return tasks + [Task("default", math.nan, c, "perception") for c in perception]
+    return tasks + [Task("default", math.nan, c, "perception", 0.0, tool, n) for tool in config.tools
+                    for n in config.num_mushrooms for c in perception]
 
 
 def target_features(scene: Any, target: int) -> dict[str, float]:
@@ -130,6 +160,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     """Run one task's episodes in this process and return one row per episode."""
     from generator import SceneConfig
     from sms3d_env.pickers import make_picker_env, parse_picker
+    from sms3d_env.pose_source import NoisyPose
     from sms3d_env.scripted_picker import run_episode
 
     physics = PickPhysicsParams(**SENSITIVITY_VARIANTS[task.variant])
@@ -138,22 +169,26 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
 
         source: Any = PerceptionPose(_perception_pipeline(config.perception_detector))
     else:
-        source = "noisy"
+        source = NoisyPose(task.error_deg, position_error=task.position_error_mm / 1000,
+                           along_axis=config.position_along_axis)
     spec = parse_picker(config.picker)
+    tool = {} if task.tool == "suction" else {"tool": task.tool}  # the picker's env may fix it
     env, picker = make_picker_env(
-        spec, scene_config=SceneConfig().replace(placement__num_mushrooms=config.num_mushrooms),
-        pose_source=source, pose_error_deg=0.0 if task.source == "perception" else task.error_deg,
-        physics=physics, **config.env_kwargs,
+        spec, scene_config=SceneConfig().replace(placement__num_mushrooms=task.num_mushrooms),
+        pose_source=source, physics=physics, **tool, **config.env_kwargs,
     )
     rows = []
     try:
         for seed in task.episode_seeds:
             result = run_episode(env, picker, seed)
-            axis_error = source.last_axis_error_deg if task.source == "perception" else task.error_deg
+            perceived = task.source == "perception"
+            axis_error = source.last_axis_error_deg if perceived else task.error_deg
+            cap_top_error = source.last_cap_top_error_mm if perceived else task.position_error_mm
             rows.append({
                 "variant": task.variant, "picker": spec.label, "source": task.source,
-                "error_deg": task.error_deg,
-                "axis_error_deg": axis_error, **result,
+                "error_deg": task.error_deg, "position_error_mm": task.position_error_mm,
+                "tool": task.tool, "num_mushrooms": task.num_mushrooms,
+                "axis_error_deg": axis_error, "cap_top_error_mm": cap_top_error, **result,
                 **target_features(env.unwrapped.scene, result["target"]),
             })
     finally:
@@ -169,10 +204,10 @@ def _run_and_save(task: Task, config: SweepConfig, parts: Path) -> str:
 
 # Settings that change what a part file holds without changing its name: a folder's parts can
 # only be reused by a sweep that agrees on them (errors, episodes and variants may grow).
-RESUME_KEYS = ("seed", "num_mushrooms", "chunk", "env_kwargs", "perception_detector", "picker",
-               "picker_sha256")
+RESUME_KEYS = ("seed", "chunk", "env_kwargs", "perception_detector", "picker", "picker_sha256",
+               "position_along_axis")
 # What a folder recorded before a key existed (its parts were made with this value).
-_RESUME_DEFAULTS = {"picker": "scripted", "picker_sha256": None}
+_RESUME_DEFAULTS = {"picker": "scripted", "picker_sha256": None, "position_along_axis": False}
 
 
 def _pose_weights_digest() -> str:
@@ -219,6 +254,11 @@ def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
     if not path.is_file() or not any(path.parent.glob("parts/*.json")):
         return
     stored = _read_json(path, "remove the folder or use another --out")
+    old_size = stored.get("num_mushrooms")
+    if isinstance(old_size, int) and old_size != 25:
+        # Before bed sizes were axes, a part's name did not say its size (25 is named by none).
+        raise ValueError(f"{path.parent} holds a sweep of {old_size}-mushroom beds made before bed "
+                         f"sizes were named in part files; use another --out")
     keys = list(RESUME_KEYS)
     if any(path.parent.glob("parts/*_perception_*.json")) and requested["pose_weights_sha256"] is not None:
         keys.append("pose_weights_sha256")  # perception parts made with other weights are stale
@@ -229,10 +269,17 @@ def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
         raise ValueError(f"{path.parent} holds a sweep with other settings ({details}); use another --out")
 
 
-def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
-    """Run every task not already in ``out/parts`` and return all rows (ordered, deterministic)."""
+BACKENDS = ("process", "ray")
+
+
+def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: bool = True,
+              backend: str = "process") -> list[dict[str, Any]]:
+    """Run every task not already in ``out/parts`` and return all rows (ordered, deterministic:
+    the same rows whatever ``workers`` and ``backend``, ``"process"`` or ``"ray"``)."""
     from tqdm.auto import tqdm
 
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     out = Path(out)
     parts = out / "parts"
     settings = _settings(config)
@@ -242,7 +289,9 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
     tasks = plan_tasks(config)
     todo = [t for t in tasks if not (parts / f"{t.name}.json").exists()]
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="sweep tasks", disable=not progress)
-    if workers <= 1:
+    if backend == "ray":
+        _run_ray(todo, config, parts, workers, bar.update)
+    elif workers <= 1:
         for task in todo:
             _run_and_save(task, config, parts)
             bar.update()
@@ -259,6 +308,23 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
     return rows
 
 
+def _run_ray(todo: list[Task], config: SweepConfig, parts: Path, workers: int, update: Any) -> None:
+    """The tasks as Ray tasks (a local cluster of ``workers`` CPUs unless one is running), each
+    writing its part file as in the process pool."""
+    try:
+        import ray
+    except ImportError as exc:
+        raise RuntimeError("backend 'ray' needs Ray: pip install 'sms3d-pick[ray]'") from exc
+    if not ray.is_initialized():
+        ray.init(num_cpus=max(workers, 1), include_dashboard=False, log_to_driver=False)
+    remote = ray.remote(_run_and_save)
+    pending = [remote.remote(task, config, parts) for task in todo]
+    while pending:
+        ready, pending = ray.wait(pending, num_returns=1)
+        ray.get(ready)
+        update()
+
+
 def _cmd_sweep(args: Any) -> int:
     import shlex
     import sys
@@ -268,14 +334,15 @@ def _cmd_sweep(args: Any) -> int:
             errors_deg=tuple(args.errors), episodes=args.episodes, seed=args.seed,
             num_mushrooms=args.num_mushrooms, variants=tuple(args.variants), chunk=args.chunk,
             perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
-            picker=args.picker,
+            picker=args.picker, position_errors_mm=tuple(args.position_errors_mm),
+            position_along_axis=args.position_along_axis, tools=tuple(args.tool),
         )
     except ConfigError as exc:
         print(f"sms3d sweep: error: argument {SWEEP_FLAGS.get(exc.field, exc.field)}: {exc.message}", file=sys.stderr)
         return 2
     try:
-        rows = run_sweep(config, args.out, workers=args.workers)
-    except (ValueError, CorruptFileError) as exc:
+        rows = run_sweep(config, args.out, workers=args.workers, backend=args.backend)
+    except (ValueError, CorruptFileError, RuntimeError) as exc:
         print(f"sms3d sweep: error: {exc}", file=sys.stderr)
         return 2
     command = "sms3d " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["sweep"] else ""
@@ -316,6 +383,7 @@ def _cmd_compare(args: Any) -> int:
 
 # The flag that sets each field SweepConfig checks, to report a refused value by what was typed.
 SWEEP_FLAGS = {"errors_deg": "--errors", "episodes": "--episodes", "chunk": "--chunk", "seed": "--seed",
+               "position_errors_mm": "--position-errors-mm", "tools": "--tool",
                "perception_episodes": "--perception-episodes", "variants": "--variants",
                "placement.num_mushrooms": "--num-mushrooms", "picker": "--picker"}
 
@@ -328,7 +396,17 @@ def register(subparsers: Any) -> None:
                    help="errors in degrees, each in [0, 180]")
     p.add_argument("--episodes", type=int, default=40, help="seeded episodes per error (>= 1, default 40)")
     p.add_argument("--seed", type=int, default=0, help="first episode seed (>= 0)")
-    p.add_argument("--num-mushrooms", type=int, default=25)
+    p.add_argument("--num-mushrooms", type=int, nargs="+", default=[25],
+                   help="mushrooms per bed; several values make bed size an axis of the sweep")
+    p.add_argument("--position-errors-mm", type=float, nargs="+", default=[0.0],
+                   help="cap-top position errors (mm, exact, perpendicular to the estimated stem "
+                        "axis) crossed with --errors: the 2-D map")
+    p.add_argument("--position-along-axis", action="store_true",
+                   help="offset the cap top along the estimated axis instead of across it")
+    p.add_argument("--tool", nargs="+", default=["suction"], choices=["suction", "hand"],
+                   help="tools to sweep (the scripted picker for each)")
+    p.add_argument("--backend", choices=BACKENDS, default="process",
+                   help="process pool (default) or Ray (same rows)")
     p.add_argument("--variants", nargs="+", default=["default"], choices=sorted(SENSITIVITY_VARIANTS),
                    help="physics settings to compare (sensitivity to unsourced assumptions)")
     p.add_argument("--perception-episodes", type=int, default=0,

@@ -52,6 +52,7 @@ class PerceptionPose:
         self.part = part
         self.fallbacks = 0
         self.last_axis_error_deg: float | None = None
+        self.last_cap_top_error_mm: float | None = None
         self._renderer: Any = None
 
     def _pipeline(self) -> Any:
@@ -83,10 +84,12 @@ class PerceptionPose:
         if not estimates:
             self.fallbacks += 1
             self.last_axis_error_deg = float(np.degrees(np.arccos(np.clip(truth.stem_axis[2], -1, 1))))
+            self.last_cap_top_error_mm = 0.0  # the fallback keeps the true cap top
             return PoseEstimate(np.asarray(truth.cap_top, float).copy(), np.eye(3))
         est = estimates[0]
         cos = float(np.clip(est.stem_axis_world @ truth.stem_axis, -1.0, 1.0))
         self.last_axis_error_deg = float(np.degrees(np.arccos(cos)))
+        self.last_cap_top_error_mm = 1000 * float(np.linalg.norm(est.cap_top_world - truth.cap_top))
         return PoseEstimate(est.cap_top_world, est.rotation_world)
 
     def close(self) -> None:

@@ -44,16 +44,24 @@ class NoisyPose:
     """Truth rotated by exactly ``error_deg`` about a random axis perpendicular to the stem.
 
     The cap-top centre is kept (it is what a camera sees best) unless ``position_std`` > 0 (m),
-    which adds isotropic Gaussian noise.
+    which adds isotropic Gaussian noise, or ``position_error`` > 0 (m), which moves it by exactly
+    that distance: in a random direction perpendicular to the *estimated* stem axis, or along it
+    (outwards, above the cap) with ``along_axis=True``. The direction is drawn after the
+    rotation, so every position error shares the rotation of the same seed (a paired design).
     """
 
-    def __init__(self, error_deg: float, position_std: float = 0.0) -> None:
+    def __init__(self, error_deg: float, position_std: float = 0.0, position_error: float = 0.0,
+                 along_axis: bool = False) -> None:
         if not np.isfinite(error_deg) or not 0 <= error_deg <= 180:
             raise ValueError(f"pose_error_deg must be in [0, 180], got {error_deg!r}")
         if not np.isfinite(position_std) or position_std < 0:
             raise ValueError(f"position_std must be >= 0, got {position_std!r}")
+        if not np.isfinite(position_error) or position_error < 0:
+            raise ValueError(f"position_error must be a finite distance >= 0 (m), got {position_error!r}")
+        if position_std > 0 and position_error > 0:
+            raise ValueError("position_std and position_error exclude each other")
         self.error = np.deg2rad(error_deg)
-        self.position_std = position_std
+        self.position_std, self.position_error, self.along_axis = position_std, position_error, along_axis
 
     def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:
         truth = OraclePose()(scene, instance_id, rng)
@@ -63,6 +71,13 @@ class NoisyPose:
         perp = np.cos(phi) * e1 + np.sin(phi) * e2
         rot = axis_angle_matrix(perp, self.error) @ truth.rotation if self.error > 0 else truth.rotation
         centre = truth.cap_top + (rng.normal(0, self.position_std, 3) if self.position_std > 0 else 0)
+        if self.position_error > 0:
+            if self.along_axis:
+                offset = rot[:, 2]
+            else:
+                psi = rng.uniform(0, 2 * np.pi)
+                offset = np.cos(psi) * rot[:, 0] + np.sin(psi) * rot[:, 1]
+            centre = centre + self.position_error * offset
         return PoseEstimate(np.asarray(centre, float), rot)
 
 

@@ -32,22 +32,30 @@ def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float,
     return (min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half)))
 
 
+def axes(row: dict[str, Any]) -> tuple[str, int, float]:
+    """A row's (tool, bed size, cap-top position error in mm): the sweep's axes besides the
+    orientation error and the physics variant (rows of earlier sweeps: suction, 25, 0)."""
+    return (row.get("tool", "suction"), int(row.get("num_mushrooms", 25)),
+            float(row.get("position_error_mm", 0.0)))
+
+
 def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]], bool] = lambda r: True) -> list[dict[str, Any]]:
-    """Success rate with its interval and failure-cause counts per (variant, error)."""
-    groups: dict[tuple[str, float], list[dict[str, Any]]] = {}
+    """Success rate with its interval and failure-cause counts per (variant, position error,
+    orientation error), for rows of one tool and bed size."""
+    groups: dict[tuple[str, float, float], list[dict[str, Any]]] = {}
     for r in rows:
         if r["reachable"] and r.get("source", "noisy") == "noisy" and keep(r):
-            groups.setdefault((r["variant"], r["error_deg"]), []).append(r)
+            groups.setdefault((r["variant"], axes(r)[2], r["error_deg"]), []).append(r)
     table = []
-    for (variant, error), group in sorted(groups.items()):
+    for (variant, position, error), group in sorted(groups.items()):
         wins = sum(r["success"] for r in group)
         lo, hi = wilson_interval(wins, len(group))
         causes: dict[str, int] = {}
         for r in group:
             if not r["success"]:
                 causes[r["failure_cause"] or "unknown"] = causes.get(r["failure_cause"] or "unknown", 0) + 1
-        table.append({"variant": variant, "error_deg": error, "n": len(group), "success": wins / len(group),
-                      "ci_low": lo, "ci_high": hi, "causes": causes})
+        table.append({"variant": variant, "position_error_mm": position, "error_deg": error, "n": len(group),
+                      "success": wins / len(group), "ci_low": lo, "ci_high": hi, "causes": causes})
     return table
 
 
@@ -66,7 +74,8 @@ def tolerable_error(table: Sequence[dict[str, Any]], variant: str = "default", w
     return answer
 
 
-CSV_COLUMNS = ("variant", "source", "error_deg", "axis_error_deg", "seed", "target", "reachable", "success",
+CSV_COLUMNS = ("variant", "picker", "tool", "num_mushrooms", "source", "error_deg", "position_error_mm",
+               "axis_error_deg", "cap_top_error_mm", "seed", "target", "reachable", "success",
                "failure_cause", "tilt_deg", "cap_diameter", "nn_distance", "steps", "return", "neighbours_disturbed",
                "bruised", "target_detached")
 
@@ -233,19 +242,46 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
     return "\n".join(lines) + "\n"
 
 
+def base_slice(rows: Sequence[dict[str, Any]]) -> tuple[str, int, float]:
+    """The (tool, bed size, position error) of the 1-D report: the first tool and bed size, the
+    smallest position error."""
+    noisy = [axes(r) for r in rows if r.get("source", "noisy") == "noisy"] or [axes(r) for r in rows]
+    tool, size = noisy[0][0], noisy[0][1]
+    return tool, size, min(p for t, n, p in noisy if (t, n) == (tool, size))
+
+
 def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str = "") -> dict[str, Path]:
-    """CSV, PNG and Markdown summary into ``out``; returns their paths. Each file is replaced
-    atomically; if any of them fails, none of the three is left (see below)."""
-    perception = perception_point(rows)
+    """CSV (every row), PNG and Markdown summary into ``out``; returns their paths. The curve
+    and its summary are those of ``base_slice``; a sweep over position errors adds the success
+    map (``sweep_map.png``), one over tools or bed sizes their slices (``sweep_slices.png``), and
+    the summary states the tolerance region (:mod:`sms3d_env.study_map`). Each file is replaced
+    atomically; if any of them fails, none is left (see below)."""
+    from sms3d_env import study_map
+
     out = Path(out)
-    paths = {"csv": out / "sweep.csv", "png": out / "sweep.png", "md": out / "summary.md"}
+    tool, size, position = base_slice(rows)
+    base = [r for r in rows if axes(r)[:2] == (tool, size) and (r.get("source") == "perception" or axes(r)[2] == position)]
+    perception = perception_point(base)
+    paths = {"csv": out / "sweep.csv", "png": out / "sweep.png", "md": out / "summary.md",
+             "map": out / "sweep_map.png", "slices": out / "sweep_slices.png"}
     try:
         write_csv(rows, paths["csv"])
-        plot_sweep(rows, paths["png"], perception)
-        write_atomic(paths["md"], summarise(rows, command, perception))
+        plot_sweep(base, paths["png"], perception)
+        text = summarise(base, command, perception)
+        if len({axes(r)[2] for r in rows if axes(r)[:2] == (tool, size)}) > 1:
+            study_map.plot_map([r for r in rows if axes(r)[:2] == (tool, size)], paths["map"])
+            text += study_map.region_summary([r for r in rows if axes(r)[:2] == (tool, size)])
+        else:
+            paths["map"].unlink(missing_ok=True)
+        if len({axes(r)[:2] for r in rows}) > 1:
+            study_map.plot_slices(rows, paths["slices"])
+            text += study_map.slices_summary(rows)
+        else:
+            paths["slices"].unlink(missing_ok=True)
+        write_atomic(paths["md"], text)
     except BaseException:
         # Files of an earlier report beside this one's would be read as describing these rows.
         for path in paths.values():
             path.unlink(missing_ok=True)
         raise
-    return paths
+    return {k: p for k, p in paths.items() if p.exists()}

@@ -93,9 +93,9 @@ def test_a_sweep_that_finished_no_task_does_not_block_the_next_and_a_bad_part_is
             "--workers", "1"]
     assert main(args) == 0
     assert json.loads((tmp_path / "sweep_config.json").read_text())["seed"] == 0
-    part = tmp_path / "parts" / "default_e0_s0-0.json"
+    part = tmp_path / "parts" / "default_e0_n8_s0-0.json"  # 8-mushroom beds: the size is named
     part.write_text(part.read_text()[:40])  # truncated
-    with pytest.raises(CorruptFileError, match="default_e0_s0-0.json"):
+    with pytest.raises(CorruptFileError, match="default_e0_n8_s0-0.json"):
         run_sweep(SweepConfig(errors_deg=(0.0,), episodes=1, num_mushrooms=8), tmp_path, progress=False)
     capsys.readouterr()
     assert main(args) == 2
@@ -126,9 +126,9 @@ def test_small_sweep_resumes_and_reports(tmp_path):
     assert removed.read_text() == before
     again = [r for r in again if r["source"] == "noisy"]
     assert json.dumps(again, sort_keys=True) == json.dumps(rows, sort_keys=True)
-    # Parts made with other scenes or another detector are not reused.
-    with pytest.raises(ValueError, match="num_mushrooms"):
-        run_sweep(dataclasses.replace(config, num_mushrooms=9), tmp_path, progress=False)
+    # Another bed size is another part (bed size is an axis); parts of another detector are not reused.
+    nine = {t.name for t in plan_tasks(dataclasses.replace(config, num_mushrooms=9))}
+    assert nine.isdisjoint(p.stem for p in parts)
     with pytest.raises(ValueError, match="perception_detector"):
         run_sweep(dataclasses.replace(config, perception_detector="det.pt"), tmp_path, progress=False)
     # Perception parts made with other pose weights are stale.
@@ -136,6 +136,10 @@ def test_small_sweep_resumes_and_reports(tmp_path):
     assert len(record["pose_weights_sha256"]) == 16
     (tmp_path / "sweep_config.json").write_text(json.dumps({**record, "pose_weights_sha256": "0" * 16}))
     with pytest.raises(ValueError, match="pose_weights_sha256"):
+        run_sweep(config, tmp_path, progress=False)
+    # A folder from before bed sizes were named in part files is not resumed at another size.
+    (tmp_path / "sweep_config.json").write_text(json.dumps({**record, "num_mushrooms": 10}))
+    with pytest.raises(ValueError, match="10-mushroom beds"):
         run_sweep(config, tmp_path, progress=False)
     paths = write_report(rows + perception, tmp_path, "sms3d sweep ...")
     with open(paths["csv"]) as fh:

@@ -1,0 +1,204 @@
+"""The accuracy answer in two dimensions: success over (orientation error x cap-top position
+error), the tolerance region, and the 1-D slices per tool and bed size.
+
+Rows are the sweep's (``accuracy_study.run_task``); every function reads the default physics
+unless told a variant, and only reachable targets of the noisy source (the perception source's
+rows are drawn as a cloud of measured errors).
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from generator.files import write_atomic
+from sms3d_env.study_report import TILTED_DEG, WITHIN_PP, axes, crowded_threshold, success_table
+
+ISO_POINTS = (2.0, 5.0, 10.0)  # iso-lines of the map: oracle success minus these many points
+
+
+def success_grid(rows: Sequence[dict[str, Any]], variant: str = "default",
+                 keep: Callable[[dict[str, Any]], bool] = lambda r: True) -> dict[str, Any]:
+    """``{"errors_deg", "positions_mm", "success", "half_width", "n"}``: success (fraction) and
+    the 95 % interval's half-width (fraction, the larger side) per (position, error) cell,
+    arrays of shape (positions, errors); NaN where a cell has no episode."""
+    table = [t for t in success_table(rows, keep) if t["variant"] == variant]
+    errors = sorted({t["error_deg"] for t in table})
+    positions = sorted({t["position_error_mm"] for t in table})
+    shape = (len(positions), len(errors))
+    success, half, n = np.full(shape, np.nan), np.full(shape, np.nan), np.zeros(shape, int)
+    for t in table:
+        i, j = positions.index(t["position_error_mm"]), errors.index(t["error_deg"])
+        success[i, j] = t["success"]
+        half[i, j] = max(t["success"] - t["ci_low"], t["ci_high"] - t["success"])
+        n[i, j] = t["n"]
+    return {"errors_deg": errors, "positions_mm": positions, "success": success, "half_width": half, "n": n}
+
+
+def tolerance_region(grid: dict[str, Any], within_pp: float = WITHIN_PP) -> list[tuple[float, float]]:
+    """The region within ``within_pp`` points of the oracle cell (0 deg, 0 mm) as a staircase:
+    ``(B mm, A deg)`` pairs meaning "while the cap-top error is <= B mm, any axis error <= A deg
+    keeps success within": A is the largest error whose cells, at every position error <= B and
+    every error <= A, all are within. Empty without an oracle cell."""
+    errors, positions, success = grid["errors_deg"], grid["positions_mm"], grid["success"]
+    if not errors or not positions or errors[0] != 0.0 or positions[0] != 0.0 or np.isnan(success[0, 0]):
+        return []
+    ok = success >= success[0, 0] - within_pp / 100.0 - 1e-9  # "within" includes exactly the bound
+    region = []
+    for i, b in enumerate(positions):
+        rows_ok = ok[: i + 1].all(axis=0)  # every position error up to b
+        last = -1
+        for j in range(len(errors)):
+            if not rows_ok[j]:
+                break
+            last = j
+        if last < 0:
+            break
+        region.append((b, errors[last]))
+    return region
+
+
+def region_sentence(region: list[tuple[float, float]], oracle: float, within_pp: float = WITHIN_PP) -> str:
+    if not region:
+        return f"no cell is within {within_pp:g} points of the oracle ({100 * oracle:.0f} %)"
+    parts = [f"axis error ≤ {a:g}° while the cap-top error is ≤ {b:g} mm" for b, a in region]
+    return f"within {within_pp:g} points of the oracle ({100 * oracle:.1f} %): " + "; or ".join(parts)
+
+
+def _perception_cloud(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    return [r for r in rows if r.get("source") == "perception" and r["reachable"]
+            and r.get("cap_top_error_mm") is not None]
+
+
+def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, variant: str = "default") -> None:
+    """Heat map of success over (orientation error, cap-top error), each cell labelled with its
+    success and 95 % half-width, iso-lines at the oracle minus 2, 5 and 10 points, and the
+    perception source's measured (axis, cap-top) errors as a cloud with its own success."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    grid = success_grid(rows, variant)
+    e, p, s = np.array(grid["errors_deg"]), np.array(grid["positions_mm"]), 100 * grid["success"]
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    # Cells drawn at their index (errors are uneven), labelled by value.
+    im = ax.imshow(s, origin="lower", cmap="RdYlGn", vmin=max(0, np.nanmin(s) - 5), vmax=100, aspect="auto")
+    for i in range(len(p)):
+        for j in range(len(e)):
+            if not np.isnan(s[i, j]):
+                ax.text(j, i, f"{s[i, j]:.0f}\n±{100 * grid['half_width'][i, j]:.0f}", ha="center",
+                        va="center", fontsize=7)
+    oracle = s[0, 0] if e[0] == 0 and p[0] == 0 else np.nan
+    if np.isfinite(oracle) and len(e) > 1 and len(p) > 1:
+        levels = sorted(oracle - d for d in ISO_POINTS)
+        cs = ax.contour(np.arange(len(e)), np.arange(len(p)), s, levels=levels, colors="k",
+                        linewidths=[0.8, 1.6, 0.8][: len(levels)])
+        ax.clabel(cs, fmt={lv: f"oracle − {oracle - lv:.0f}" for lv in levels}, fontsize=7)
+    cloud = _perception_cloud(rows)
+    if cloud:
+        # Measured errors mapped onto the cell axes by interpolation between cell centres.
+        x = np.interp([r["axis_error_deg"] for r in cloud], e, np.arange(len(e)))
+        y = np.interp([r["cap_top_error_mm"] for r in cloud], p, np.arange(len(p)))
+        picked = np.array([r["success"] for r in cloud], bool)
+        ax.scatter(x[picked], y[picked], s=12, c="k", marker="o", label="perception: picked")
+        ax.scatter(x[~picked], y[~picked], s=24, c="m", marker="x", label="perception: missed")
+        ax.set_title(f"Success (%, ± 95 % half-width); perception {100 * picked.mean():.0f} % of {len(cloud)}")
+        ax.legend(fontsize=7, loc="upper right")
+    else:
+        ax.set_title("Pick success (%, ± 95 % half-width) over orientation × cap-top error")
+    ax.set_xticks(range(len(e)), [f"{v:g}" for v in e])
+    ax.set_yticks(range(len(p)), [f"{v:g}" for v in p])
+    ax.set_xlabel("orientation error θ (degrees, perpendicular to the stem)")
+    ax.set_ylabel("cap-top position error (mm)")
+    fig.colorbar(im, ax=ax, label="success (%)")
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def plot_slices(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
+    """Success vs orientation error (no position error, default physics), one line per (tool,
+    bed size) that the sweep ran."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for tool, size in sorted({axes(r)[:2] for r in rows}):
+        sub = [t for t in success_table([r for r in rows if axes(r)[:2] == (tool, size)])
+               if t["variant"] == "default" and t["position_error_mm"] == 0.0]
+        if not sub:
+            continue
+        y = [100 * t["success"] for t in sub]
+        err = [[100 * (t["success"] - t["ci_low"]) for t in sub], [100 * (t["ci_high"] - t["success"]) for t in sub]]
+        ax.errorbar([t["error_deg"] for t in sub], y, yerr=err, marker="o", capsize=3,
+                    label=f"{tool}, {size} mushrooms")
+    ax.set_xlabel("orientation error θ (degrees)")
+    ax.set_ylabel("pick success (%)")
+    ax.set_ylim(0, 105)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    ax.set_title("Slices: success vs orientation error per tool and bed size")
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def _save(fig: Any, path: str | Path) -> None:
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=120)
+    plt.close(fig)
+    write_atomic(Path(path), buffer.getvalue())
+
+
+def region_summary(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown: the tolerance region per physics variant and subset (all, tilted, crowded),
+    and the perception source's measured errors against it."""
+    crowded = crowded_threshold(rows)
+    subsets = {
+        "all reachable targets": lambda r: True,
+        f"tilted > {TILTED_DEG:g}°": lambda r: r["tilt_deg"] > TILTED_DEG,
+        f"crowded (nearest neighbour < {1000 * crowded:.0f} mm)": lambda r: r["nn_distance"] < crowded,
+    }
+    lines = ["", "## The tolerance region (orientation × cap-top position error)", "",
+             "| physics | subset | region | episodes per cell |", "| --- | --- | --- | --- |"]
+    for variant in dict.fromkeys(r["variant"] for r in rows if r.get("source", "noisy") == "noisy"):
+        for label, keep in subsets.items():
+            grid = success_grid(rows, variant, keep)
+            if not grid["errors_deg"]:
+                continue
+            oracle = grid["success"][0, 0]
+            sentence = region_sentence(tolerance_region(grid), oracle)
+            counts = grid["n"][grid["n"] > 0]
+            lines.append(f"| {variant} | {label} | {sentence} | {counts.min()}–{counts.max()} |")
+    cloud = _perception_cloud(rows)
+    if cloud:
+        axis = np.array([r["axis_error_deg"] for r in cloud])
+        top = np.array([r["cap_top_error_mm"] for r in cloud])
+        picked = np.mean([r["success"] for r in cloud])
+        lines += ["", f"Perception source: axis error median {np.median(axis):.1f}° (90th percentile "
+                      f"{np.percentile(axis, 90):.1f}°), cap-top error median {np.median(top):.1f} mm "
+                      f"(90th percentile {np.percentile(top, 90):.1f} mm); picked {100 * picked:.1f} % of "
+                      f"{len(cloud)}."]
+    return "\n".join(lines) + "\n"
+
+
+def slices_summary(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown: success per orientation error for every (tool, bed size), no position error."""
+    lines = ["", "## Slices per tool and bed size (no position error, default physics)", "",
+             "| tool | mushrooms | " + " | ".join(f"{e:g}°" for e in sorted({r['error_deg'] for r in rows
+                                                                              if r.get('source', 'noisy') == 'noisy'})) + " |"]
+    errors = sorted({r["error_deg"] for r in rows if r.get("source", "noisy") == "noisy"})
+    lines.append("| --- | --- |" + " --- |" * len(errors))
+    for tool, size in sorted({axes(r)[:2] for r in rows}):
+        table = {t["error_deg"]: t for t in success_table([r for r in rows if axes(r)[:2] == (tool, size)])
+                 if t["variant"] == "default" and t["position_error_mm"] == 0.0}
+        cells = [f"{100 * table[e]['success']:.1f} % (n {table[e]['n']})" if e in table else "–" for e in errors]
+        lines.append(f"| {tool} | {size} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
