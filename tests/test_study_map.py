@@ -107,3 +107,29 @@ def test_process_pool_and_ray_give_the_same_rows(tmp_path):
     assert json.dumps(pool, sort_keys=True) == json.dumps(ray_rows, sort_keys=True)
     assert {r["position_error_mm"] for r in pool} == {0.0, 8.0}
     assert {r["cap_top_error_mm"] for r in pool} == {0.0, 8.0}
+
+
+def test_a_sweep_killed_with_sigkill_resumes_to_the_same_csv(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    args = ["--errors", "0", "20", "--position-errors-mm", "0", "8", "--episodes", "2", "--chunk", "1",
+            "--num-mushrooms", "8", "--workers", "1"]
+    cmd = [sys.executable, "-m", "generator.cli", "sweep"]
+    whole = tmp_path / "whole"
+    subprocess.run(cmd + ["--out", str(whole)] + args, check=True, capture_output=True)
+    killed = tmp_path / "killed"
+    proc = subprocess.Popen(cmd + ["--out", str(killed)] + args, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not list(killed.glob("parts/*.json")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done = len(list(killed.glob("parts/*.json")))
+    assert 1 <= done < 8 and not (killed / "sweep.csv").exists()
+    subprocess.run(cmd + ["--out", str(killed)] + args, check=True, capture_output=True)
+    assert (killed / "sweep.csv").read_bytes() == (whole / "sweep.csv").read_bytes()
