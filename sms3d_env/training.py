@@ -72,6 +72,8 @@ class TrainConfig:
         eval_episodes: episodes per periodic evaluation (oracle poses, same scenes per eval).
         learning_rate, batch_size, n_steps (PPO, per env), buffer_size and learning_starts (SAC),
         gamma, net_arch: algorithm hyper-parameters.
+        log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
+            standard deviation of 1 on every normalised command; a residual starts quieter).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
             policy's per-step forward pass is tiny, and with the env workers (and anything else)
             on the same cores, 2 intra-op threads made it ~50x slower here (64 ms vs 1.2 ms).
@@ -104,6 +106,7 @@ class TrainConfig:
     learning_starts: int = 1_000
     gamma: float = 0.99
     net_arch: tuple[int, ...] = (256, 256)
+    log_std_init: float = 0.0
     device: str = "cpu"
     torch_threads: int = 1
     verbose: int = 1
@@ -157,6 +160,8 @@ class TrainConfig:
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
             raise bad("net_arch", "must be a non-empty sequence of positive layer widths")
+        if not (isinstance(self.log_std_init, (int, float)) and math.isfinite(self.log_std_init)):
+            raise bad("log_std_init", "must be a finite number")
         if not self.out:
             raise bad("out", "must be a non-empty path")
         object.__setattr__(self, "net_arch", tuple(int(h) for h in self.net_arch))
@@ -235,7 +240,7 @@ def _normalized(env: Any, training: bool) -> Any:
 def _build_model(cfg: TrainConfig, env: Any) -> Any:
     from stable_baselines3 import PPO, SAC
 
-    policy_kwargs = {"net_arch": list(cfg.net_arch)}
+    policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": float(cfg.log_std_init)}
     if cfg.algo == "ppo":
         n_steps = cfg.n_steps
         batch = min(cfg.batch_size, n_steps * cfg.n_envs)
@@ -487,6 +492,8 @@ def _cmd_train(args: Any) -> int:
                           normalize=args.normalize or residual, scene_pool=args.scene_pool,
                           residual_scale=args.residual_scale if residual else 0.0,
                           pose_error_range_deg=args.pose_error_range,
+                          log_std_init=args.log_std_init if args.log_std_init is not None
+                          else (-1.6 if residual else 0.0),
                           total_steps=args.steps, max_wall_s=args.max_wall_s,
                           n_envs=args.n_envs, pose_source=pose_source, pose_error_deg=args.pose_error_deg,
                           reward_type=args.reward_type, num_mushrooms=args.num_mushrooms, seed=args.seed,
@@ -557,6 +564,8 @@ def register(subparsers: Any) -> None:
                    help="train under a pose error drawn per episode in [LOW, HIGH] degrees")
     p.add_argument("--residual-scale", type=float, default=0.5,
                    help="--recipe residual: the residual's largest share of each command")
+    p.add_argument("--log-std-init", type=float, default=None,
+                   help="initial log standard deviation of the policy (default 0; -1.6 for --recipe residual)")
     p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)
     p.add_argument("--out", default=defaults.out, help="run folder (model.zip, progress.csv, ...)")
     p.add_argument("--seed", type=int, default=defaults.seed)
