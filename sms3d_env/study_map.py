@@ -8,15 +8,21 @@ rows are drawn as a cloud of measured errors).
 
 from __future__ import annotations
 
-import io
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from generator.files import write_atomic
-from sms3d_env.study_report import TILTED_DEG, WITHIN_PP, axes, crowded_threshold, success_table
+from sms3d_env.study_report import (
+    TILTED_DEG,
+    WITHIN_PP,
+    axes,
+    crowded_threshold,
+    plot_curves,
+    save_figure,
+    success_table,
+)
 
 ISO_POINTS = (2.0, 5.0, 10.0)  # iso-lines of the map: oracle success minus these many points
 
@@ -117,44 +123,19 @@ def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, variant: str = "d
     ax.set_ylabel("cap-top position error (mm)")
     fig.colorbar(im, ax=ax, label="success (%)")
     fig.tight_layout()
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_slices(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
     """Success vs orientation error (no position error, default physics), one line per (tool,
     bed size) that the sweep ran."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    curves = {}
     for tool, size in sorted({axes(r)[:2] for r in rows}):
-        sub = [t for t in success_table([r for r in rows if axes(r)[:2] == (tool, size)])
-               if t["variant"] == "default" and t["position_error_mm"] == 0.0]
-        if not sub:
-            continue
-        y = [100 * t["success"] for t in sub]
-        err = [[100 * (t["success"] - t["ci_low"]) for t in sub], [100 * (t["ci_high"] - t["success"]) for t in sub]]
-        ax.errorbar([t["error_deg"] for t in sub], y, yerr=err, marker="o", capsize=3,
-                    label=f"{tool}, {size} mushrooms")
-    ax.set_xlabel("orientation error θ (degrees)")
-    ax.set_ylabel("pick success (%)")
-    ax.set_ylim(0, 105)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
-    ax.set_title("Slices: success vs orientation error per tool and bed size")
-    fig.tight_layout()
-    _save(fig, path)
-
-
-def _save(fig: Any, path: str | Path) -> None:
-    import matplotlib.pyplot as plt
-
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
-    plt.close(fig)
-    write_atomic(Path(path), buffer.getvalue())
+        table = [t for t in success_table([r for r in rows if axes(r)[:2] == (tool, size)])
+                 if t["variant"] == "default" and t["position_error_mm"] == 0.0]
+        if table:
+            curves[f"{tool}, {size} mushrooms"] = table
+    plot_curves(curves, path, "Slices: success vs orientation error per tool and bed size")
 
 
 def region_summary(rows: Sequence[dict[str, Any]]) -> str:

@@ -160,38 +160,51 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     if causes:
         bottom.legend(fontsize=8)
     fig.tight_layout()
+    save_figure(fig, path)
+
+
+def save_figure(fig: Any, path: str | Path) -> None:
+    """Write a matplotlib figure as PNG atomically and close it."""
+    import matplotlib.pyplot as plt
+
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=120)
     plt.close(fig)
     write_atomic(Path(path), buffer.getvalue())
 
 
-def plot_pickers(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path) -> None:
-    """Success vs orientation error, one line per picker (default physics, noisy source, 95 %
-    Wilson intervals): the sweeps of several pickers on the same seeded episodes."""
+def plot_curves(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path, title: str,
+                xlabel: str = "orientation error θ (degrees, rotation perpendicular to the stem)") -> None:
+    """Success vs orientation error with 95 % Wilson intervals, one line per label; each value
+    is a ``success_table`` of one slice."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, rows in curves.items():
-        sub = [r for r in success_table(rows) if r["variant"] == "default"]
-        x = [r["error_deg"] for r in sub]
-        y = [100 * r["success"] for r in sub]
-        err = [[100 * (r["success"] - r["ci_low"]) for r in sub], [100 * (r["ci_high"] - r["success"]) for r in sub]]
-        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=f"{label} (n = {min(r['n'] for r in sub)}/error)")
-    ax.set_xlabel("orientation error θ (degrees, rotation perpendicular to the stem)")
+    for label, table in curves.items():
+        y = [100 * t["success"] for t in table]
+        err = [[100 * (t["success"] - t["ci_low"]) for t in table], [100 * (t["ci_high"] - t["success"]) for t in table]]
+        ax.errorbar([t["error_deg"] for t in table], y, yerr=err, marker="o", capsize=3,
+                    label=f"{label} (n = {min(t['n'] for t in table)}/error)")
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("pick success (%)")
     ax.set_ylim(0, 105)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
-    ax.set_title("Pickers on the same seeded episodes: success vs orientation error")
+    ax.set_title(title)
     fig.tight_layout()
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
-    plt.close(fig)
-    write_atomic(Path(path), buffer.getvalue())
+    save_figure(fig, path)
+
+
+def plot_pickers(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path) -> None:
+    """One line per picker (default physics, noisy source, no position error): the sweeps of
+    several pickers on the same seeded episodes."""
+    tables = {label: [t for t in success_table(rows) if t["variant"] == "default" and t["position_error_mm"] == 0.0]
+              for label, rows in curves.items()}
+    plot_curves({k: v for k, v in tables.items() if v}, path,
+                "Pickers on the same seeded episodes: success vs orientation error")
 
 
 def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dict[str, float] | None = None) -> str:
