@@ -390,7 +390,7 @@ SWEEP_FLAGS = {"errors_deg": "--errors", "episodes": "--episodes", "chunk": "--c
 
 def register(subparsers: Any) -> None:
     """Add ``sms3d sweep``."""
-    p = subparsers.add_parser("sweep", help="pick success of the scripted picker against orientation error")
+    p = subparsers.add_parser("sweep", help="pick success of a picker against orientation and position error")
     p.add_argument("--out", required=True, help="output folder (resumes if it holds earlier parts)")
     p.add_argument("--errors", type=float, nargs="+", default=list(DEFAULT_ERRORS_DEG),
                    help="errors in degrees, each in [0, 180]")

@@ -539,7 +539,7 @@ def _cmd_eval(args: Any) -> int:
 
 
 def register(subparsers: Any) -> None:
-    """Add ``sms3d train-policy`` and ``sms3d eval-policy``."""
+    """Add ``sms3d train-policy``, ``sms3d eval-policy`` and ``sms3d learning-curve``."""
     defaults = TrainConfig()
     p = subparsers.add_parser(
         "train-policy", help="train a pick policy: RL (PPO/SAC, stable-baselines3) or behaviour "
@@ -593,6 +593,10 @@ def register(subparsers: Any) -> None:
     e.add_argument("--num-mushrooms", type=int, default=None, help="mushrooms per bed (default 25)")
     e.add_argument("--json", default=None, help="also write the result here")
     e.set_defaults(func=_cmd_eval)
+
+    from sms3d_env import learning_curve
+
+    learning_curve.register(subparsers)
 
 
 def main(argv: list[str] | None = None) -> int:

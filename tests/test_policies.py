@@ -94,3 +94,21 @@ def test_the_shipped_policy_loads_and_was_trained_on_the_training_id():
     assert actor.env_id == "SMS3DPickTrain-v0"
     metrics = json.loads((SHIPPED_POLICY.parent / "metrics.json").read_text())
     assert metrics["oracle"]["successes"] / metrics["oracle"]["episodes"] >= 0.5
+
+
+def test_learning_curve_reads_evaluations_with_their_wall_time(tmp_path, capsys):
+    from sms3d_env.learning_curve import read_curve
+
+    run = tmp_path / "ppo_s0"
+    run.mkdir()
+    (run / "progress.csv").write_text(
+        "time/total_timesteps,time/time_elapsed,eval/success_rate\n"
+        "2048,10,\n4096,,0.25\n6144,31,\n8192,,0.5\n")
+    assert read_curve(run) == [{"steps": 4096.0, "wall_s": 10.0, "success": 0.25},
+                               {"steps": 8192.0, "wall_s": 31.0, "success": 0.5}]
+    assert main(["learning-curve", str(run), "--out", str(tmp_path / "c.png")]) == 0
+    assert "| ppo_s0 | 2 | 8192 |" in capsys.readouterr().out
+    assert (tmp_path / "c.png").stat().st_size > 5_000
+    (run / "progress.csv").write_text("time/total_timesteps,time/time_elapsed\n2048,10\n")
+    with pytest.raises(ValueError, match="progress.csv"):
+        read_curve(run)

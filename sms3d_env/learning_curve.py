@@ -1,0 +1,91 @@
+"""Learning curves of ``sms3d train-policy`` runs: the periodic evaluation's success rate against
+env steps and wall time, read from each run's ``progress.csv`` (SB3's CSV logger).
+
+``sms3d learning-curve RUN [RUN ...] --out curve.png`` draws them side by side (one line per run,
+e.g. one per training seed) and prints the table.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+EVAL_COLUMN, STEPS_COLUMN, WALL_COLUMN = "eval/success_rate", "time/total_timesteps", "time/time_elapsed"
+
+
+def read_curve(run: str | Path) -> list[dict[str, float]]:
+    """``[{"steps", "wall_s", "success"}]`` per periodic evaluation of a run folder, in order.
+
+    SB3 writes the evaluation and the rollout statistics on separate rows; the wall time of an
+    evaluation row is the latest one logged before it (FileNotFoundError / ValueError name the
+    file when it is missing or has no evaluation)."""
+    path = Path(run) / "progress.csv"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no progress.csv (is {run} a train-policy run folder?)")
+    points: list[dict[str, float]] = []
+    wall = math.nan
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            if row.get(WALL_COLUMN):
+                wall = float(row[WALL_COLUMN])
+            if row.get(EVAL_COLUMN):
+                points.append({"steps": float(row[STEPS_COLUMN]), "wall_s": wall,
+                               "success": float(row[EVAL_COLUMN])})
+    if not points:
+        raise ValueError(f"{path}: no {EVAL_COLUMN} rows (was --eval-freq 0?)")
+    return points
+
+
+def plot_curves(runs: dict[str, list[dict[str, float]]], path: str | Path) -> None:
+    """Two panels: success against env steps and against wall time, one line per run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sms3d_env.study_report import save_figure
+
+    fig, (by_steps, by_wall) = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    for label, points in runs.items():
+        y = [100 * p["success"] for p in points]
+        by_steps.plot([p["steps"] / 1e3 for p in points], y, marker=".", label=label)
+        by_wall.plot([p["wall_s"] / 60 for p in points], y, marker=".", label=label)
+    by_steps.set_xlabel("env steps (thousands)")
+    by_wall.set_xlabel("wall time (minutes)")
+    by_steps.set_ylabel("periodic evaluation success (%)")
+    for ax in (by_steps, by_wall):
+        ax.set_ylim(-2, 102)
+        ax.grid(alpha=0.3)
+    by_steps.legend(fontsize=8)
+    fig.suptitle("Learning curves")
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def _cmd(args: Any) -> int:
+    import sys
+
+    try:
+        runs = {Path(r).name: read_curve(r) for r in args.runs}
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"sms3d learning-curve: error: {exc}", file=sys.stderr)
+        return 2
+    print("| run | evaluations | last steps | last wall (min) | last success | best success |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for name, points in runs.items():
+        last = points[-1]
+        print(f"| {name} | {len(points)} | {last['steps']:.0f} | {last['wall_s'] / 60:.1f} | "
+              f"{100 * last['success']:.0f} % | {100 * max(p['success'] for p in points):.0f} % |")
+    plot_curves(runs, args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``sms3d learning-curve``."""
+    p = subparsers.add_parser("learning-curve", help="success of train-policy runs against env steps and wall time")
+    p.add_argument("runs", nargs="+", help="train-policy run folders (each with progress.csv)")
+    p.add_argument("--out", required=True, help="PNG to write")
+    p.set_defaults(func=_cmd)
