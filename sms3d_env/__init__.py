@@ -17,7 +17,9 @@ from gymnasium.envs.registration import register, registry  # noqa: E402
 _EXPORTS = {
     "ControllerConfig": "controller", "IKController": "controller",
     "PickPhysicsParams": "physics_params",
-    "FAILURE_CAUSES": "pick_env", "SMS3DPickEnv": "pick_env",
+    "FAILURE_CAUSES": "picking_model", "SMS3DPickEnv": "pick_env",
+    "EpisodeState": "picking_model", "PickingModel": "picking_model",
+    "World": "world", "build_world": "world",
     "NoisyPose": "pose_source", "OraclePose": "pose_source", "PoseEstimate": "pose_source",
     "PoseSource": "pose_source", "make_pose_source": "pose_source",
     "TOOLS": "robot", "RobotConfig": "robot",

@@ -31,6 +31,6 @@ def test_scripted_hand_pick_detaches_and_lifts_the_target():
     u = env.unwrapped
     assert isinstance(sms3d_env.ScriptedPicker.for_env(env), sms3d_env.HandPicker)
     assert result["success"], result
-    assert result["target_detached"] and u._ep.grip == u._ep.target  # held by the fingers
-    assert u._lift() >= u.params.lift_height
-    assert u.model.neq == len(u.free_ids)  # root welds only: the hand has no grip weld
+    assert result["target_detached"] and u.picking.state.grip == u.picking.state.target  # held by the fingers
+    assert u.picking.lift() >= u.params.lift_height
+    assert u.model.neq == len(u.world.free_ids)  # root welds only: the hand has no grip weld

@@ -21,20 +21,20 @@ def test_holding_force_from_vacuum_and_area():
 def test_mushrooms_stay_rooted_under_gravity_and_small_push():
     env = gym.make("SMS3DPick-v0", scene_config=SMALL).unwrapped
     env.reset(seed=0)
-    start = env.data.xpos[env.body_ids].copy()
+    start = env.data.xpos[env.world.body_ids].copy()
     for _ in range(25):  # 1 s with the arm still
         env.step(np.zeros(7, np.float32))
-    assert np.linalg.norm(env.data.xpos[env.body_ids] - start, axis=1).max() < 0.002
-    assert all(env.data.eq_active[env.root_eq[env.root_eq >= 0]])
+    assert np.linalg.norm(env.data.xpos[env.world.body_ids] - start, axis=1).max() < 0.002
+    assert all(env.data.eq_active[env.world.root_eq[env.world.root_eq >= 0]])
     # A small push (0.3 N) on every mushroom for 0.5 s does not uproot any.
     import mujoco
 
     for _ in range(250):
-        env.data.xfrc_applied[env.body_ids, 0] = 0.3
+        env.data.xfrc_applied[env.world.body_ids, 0] = 0.3
         mujoco.mj_step(env.model, env.data)
-        env._picking_physics()
-    assert all(env.data.eq_active[env.root_eq[env.root_eq >= 0]])
-    assert np.linalg.norm(env.data.xpos[env.body_ids] - start, axis=1).max() < 0.005
+        env.picking.after_substep()
+    assert all(env.data.eq_active[env.world.root_eq[env.world.root_eq >= 0]])
+    assert np.linalg.norm(env.data.xpos[env.world.body_ids] - start, axis=1).max() < 0.005
 
 
 def test_noisy_pose_error_is_exact():
@@ -85,7 +85,7 @@ def test_wrist_hand_and_tool_collide_with_soil_and_mushrooms_not_with_the_arm(to
                     or (m.geom_contype[g2] & m.geom_conaffinity[g1]))
 
     soil = m.geom("terrain").id
-    cap = int(env.cap_geoms[env._ep.target])
+    cap = int(env.world.cap_geoms[env.picking.state.target])
     names = ["jaco/ring_5", "jaco/link_5", "jaco/ring_6", *TOOL_GEOMS[tool]]
     geoms = [m.geom(n).id for n in names]
     for g in geoms:

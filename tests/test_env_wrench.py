@@ -68,22 +68,22 @@ def test_env_grip_wrench_is_about_the_cup_contact():
     env = gym.make("SMS3DPick-v0", scene_config=cfg).unwrapped
     env.reset(seed=0)
     m, d = env.model, env.data
-    k = env._ep.target
-    b = env.body_ids[k]
-    d.eq_active[env.root_eq[k]] = 0  # detached, and moved up to the cup
+    k = env.picking.state.target
+    b = env.world.body_ids[k]
+    d.eq_active[env.world.root_eq[k]] = 0  # detached, and moved up to the cup
     qadr = m.jnt_qposadr[m.body_jntadr[b]]
-    d.qpos[qadr : qadr + 3] += d.site_xpos[env.tool_site] - d.site_xpos[env.cap_top_sites[k]]
+    d.qpos[qadr : qadr + 3] += d.site_xpos[env.world.tool_site] - d.site_xpos[env.world.cap_top_sites[k]]
     mujoco.mj_forward(m, d)
-    env._grip(k, d.site_xpos[env.tool_site].copy())  # sealed where the cup is now
+    env.picking.grip(k, d.site_xpos[env.world.tool_site].copy())  # sealed where the cup is now
     m.body_gravcomp[b] = 0.0
     f_app = np.array([0.1, 0.05, -0.2])
     d.xfrc_applied[b, :3] = f_app
     for _ in range(1500):
         mujoco.mj_step(m, d)
     mujoco.mj_forward(m, d)
-    force, moment, z = env.grip_wrench()
+    force, moment, z = env.picking.grip_wrench()
     load = f_app + m.body_subtreemass[b] * m.opt.gravity
     np.testing.assert_allclose(force, -load, atol=2e-3)
-    pc = d.site_xpos[env.tool_site]
+    pc = d.site_xpos[env.world.tool_site]
     np.testing.assert_allclose(moment, -np.cross(d.xipos[b] - pc, load), atol=2e-4)
-    np.testing.assert_allclose(z, d.site_xmat[env.tool_site].reshape(3, 3)[:, 2])
+    np.testing.assert_allclose(z, d.site_xmat[env.world.tool_site].reshape(3, 3)[:, 2])

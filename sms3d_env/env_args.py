@@ -1,0 +1,76 @@
+"""Argument checks of ``SMS3DPickEnv``: refuse what the env could not honour or would silently
+ignore, with a ``ValueError``/``TypeError`` naming the argument (audit: issue 17, items 4 and 9)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from sms3d_env.rewards import REWARD_TYPES
+from sms3d_env.robot import TOOLS
+from sms3d_env.targets import RULES
+
+SUCTION_MODES = ("momentary", "latched")
+RENDER_MODES = ("rgb_array", "depth_array")
+
+
+def _non_negative_int(name: str, v: Any, least: int = 0) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
+        raise ValueError(f"{name} must be an integer >= {least}, got {v!r}")
+
+
+def _finite(name: str, v: Any, lo: float, hi: float, what: str) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and lo <= v <= hi):
+        raise ValueError(f"{name} must be {what}, got {v!r}")
+
+
+def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, substeps: Any, tool: Any,
+                   suction_mode: Any, horizon: Any, scene_pool: Any, pool_seed: Any, scenes: Any,
+                   pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
+                   image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
+                   scene_config: Any) -> None:
+    """Every check of the env's keyword arguments that needs no model (``tool`` is the resolved
+    tool, ``robot.tool`` or the ``tool`` argument)."""
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
+    if reward_type not in REWARD_TYPES:
+        raise ValueError(f"reward_type must be one of {REWARD_TYPES}, got {reward_type!r}")
+    _finite("control_dt", control_dt, 1e-6, math.inf, "a finite number > 0 (s)")
+    _non_negative_int("substeps", substeps, 1)
+    if tool not in TOOLS:
+        raise ValueError(f"tool must be one of {TOOLS}, got {tool!r}")
+    if suction_mode not in SUCTION_MODES:
+        raise ValueError(f"suction_mode must be one of {SUCTION_MODES}, got {suction_mode!r}")
+    if tool != "suction" and suction_mode != "momentary":
+        raise ValueError(f"suction_mode={suction_mode!r} applies to the suction tool only (tool={tool!r})")
+    _non_negative_int("horizon", horizon, 1)
+    _non_negative_int("scene_pool", scene_pool)
+    _non_negative_int("pool_seed", pool_seed)
+    if scenes is not None and not isinstance(scenes, (str, bytes)) and hasattr(scenes, "__len__") and len(scenes) == 0:
+        raise ValueError("scenes must be a non-empty sequence")
+    if scene_pool and scenes is not None:
+        raise ValueError("scene_pool draws generated beds; with scenes given it would be ignored")
+    for name, v in (("pose_error_deg", pose_error_deg), ("position_noise", position_noise)):
+        _finite(name, v, 0.0, math.inf, "a finite number >= 0")
+    if pose_source != "noisy" and (pose_error_deg or position_noise):
+        raise ValueError(f"pose_error_deg and position_noise apply to pose_source='noisy' only; with "
+                         f"pose_source={pose_source!r} they would be ignored (got pose_error_deg="
+                         f"{pose_error_deg!r}, position_noise={position_noise!r})")
+    if target_rule not in RULES:
+        raise ValueError(f"target_rule must be one of {RULES}, got {target_rule!r}")
+    for name, size in (("image_size", image_size), ("render_size", render_size)):
+        ok = (isinstance(size, (tuple, list)) and len(size) == 2
+              and all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1 for n in size))
+        if not ok:
+            raise ValueError(f"{name} must be two integers >= 1 (height, width), got {size!r}")
+    _finite("max_tilt_deg", max_tilt_deg, 0.0, 90.0, "a finite number in [0, 90]")
+    if free_radius is not None:
+        _finite("free_radius", free_radius, 1e-9, math.inf, "None or a finite number > 0 (m)")
+    if scene_config is not None:
+        from generator.config import SceneConfig
+
+        if not isinstance(scene_config, SceneConfig):
+            raise TypeError(f"scene_config must be a generator.SceneConfig or None, got "
+                            f"{type(scene_config).__name__} {scene_config!r}")

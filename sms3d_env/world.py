@@ -1,0 +1,211 @@
+"""The world of one episode: the scene and the robot assembled into one MuJoCo model, its data,
+and the id tables the picking model and the env read (dm_control's entities, apart from the task).
+
+``build_world(scene, target, ...)`` returns a ``World``. Only mushrooms within ``free_radius`` of
+the target keep a free joint and a root weld; with the suction tool each of them also gets an
+inactive grip weld to the cup. Contact masks (physics.py's bits) are set here once; the picking
+model changes them as mushrooms detach and lift.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from sms3d_env import physics as ph
+from sms3d_env.hand import add_stem_sockets
+from sms3d_env.robot import (
+    ARM_JOINTS,
+    CUP_BODY,
+    CUP_GEOM,
+    PREFIX,
+    TOOL_SITE,
+    WRIST_FORCE,
+    WRIST_TORQUE,
+    RobotConfig,
+    attach_robot,
+)
+
+_STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION)
+
+
+@dataclass
+class World:
+    """Model, data and ids of one episode's world (n mushrooms; arrays indexed by mushroom id
+    unless named per geom or per equality).
+
+    Attributes:
+        model, data: MuJoCo model and data.
+        scene: the ``generator.Scene``.
+        tool: ``"suction"`` or ``"hand"``.
+        is_free (n,), free_ids: mushrooms with a free joint (the others are static bodies).
+        body_ids, cap_geoms, stem_geoms, cap_top_sites (n,): MuJoCo ids.
+        dofadr, root_eq, grip_eq (n,): free-joint dof address, root weld, grip weld (-1 if none).
+        is_root_eq (neq,), geom_mushroom (ngeom,: mushroom id or -1), is_cap, robot_geom (ngeom,).
+        cup_geom, cup_body: suction cup ids (-1 with the hand).
+        tool_site, terrain_geom: site and geom ids.
+        arm_qadr, arm_dadr (6,): the arm joints' qpos / dof addresses.
+        wrench_adr (6,): sensordata addresses of the wrist force (3, N) and torque (3, N m).
+        cap_radius (n,): m.
+        free_aff, lifted_aff: conaffinity of detached mushrooms before and after they clear the
+            soil (the hand's stem sockets add a bit).
+        cup_mask: the cup face's (contype, conaffinity) when not sealed.
+    """
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    scene: Any
+    tool: str
+    is_free: np.ndarray
+    free_ids: np.ndarray
+    body_ids: np.ndarray
+    cap_geoms: np.ndarray
+    stem_geoms: np.ndarray
+    cap_top_sites: np.ndarray
+    dofadr: np.ndarray
+    root_eq: np.ndarray
+    grip_eq: np.ndarray
+    is_root_eq: np.ndarray
+    geom_mushroom: np.ndarray
+    is_cap: np.ndarray
+    robot_geom: np.ndarray
+    cup_geom: int
+    cup_body: int
+    tool_site: int
+    terrain_geom: int
+    arm_qadr: np.ndarray
+    arm_dadr: np.ndarray
+    wrench_adr: np.ndarray
+    cap_radius: np.ndarray
+    free_aff: int
+    lifted_aff: int
+    cup_mask: tuple[int, int]
+
+    def __getstate__(self) -> dict[str, Any]:
+        # A sleeping island's latent state does not pickle (MuJoCo keeps it only through
+        # mj_copyData): carry the integration state; the copy wakes every tree.
+        state = self.__dict__.copy()
+        flat = np.empty(mujoco.mj_stateSize(self.model, _STATE))
+        mujoco.mj_getState(self.model, self.data, flat, _STATE)
+        state["data"] = flat
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.data = mujoco.MjData(self.model)
+        mujoco.mj_setState(self.model, self.data, state["data"], _STATE)
+        mujoco.mj_forward(self.model, self.data)
+
+
+def free_set(scene: Any, target: int, free_radius: float | None) -> set[int]:
+    """Mushrooms whose stem base lies within ``free_radius`` (m) of the target's, and the target
+    (every mushroom if None)."""
+    n = len(scene.instances)
+    if free_radius is None:
+        return set(range(n))
+    base = np.array([np.asarray(inst.position, float) for inst in scene.instances])
+    near = np.linalg.norm(base - base[target], axis=1) <= free_radius
+    return {int(i) for i in np.nonzero(near)[0]} | {int(target)}
+
+
+def world_spec(scene: Any, free: set[int], robot: RobotConfig, timestep: float) -> mujoco.MjSpec:
+    """The scene + robot ``MjSpec`` (grip welds or stem sockets per free mushroom, cameras)."""
+    from generator.mjcf import scene_to_spec
+
+    spec = scene_to_spec(scene, free_ids=free)
+    attach_robot(spec, robot)
+    if robot.tool == "suction":
+        for i in sorted(free):
+            spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
+                              objtype=mujoco.mjtObj.mjOBJ_BODY, name1=PREFIX + CUP_BODY,
+                              name2=f"mushroom_{i}", active=False)
+    else:
+        add_stem_sockets(spec, scene, sorted(free))
+        # Friction grasps creep out of MuJoCo's default pyramidal cone (impratio 1): lifted
+        # mushrooms slid out of the closed fingers. The elliptic cone with impratio 10 (MuJoCo's
+        # remedy for slip) keeps them (benchmarks/RESULTS.md). Hand only: the suction model
+        # stays as its accuracy study measured it.
+        spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+        spec.option.impratio = 10.0
+    spec.worldbody.add_camera(name="side", pos=[0.0, -0.42, 0.28],
+                              xyaxes=[1, 0, 0, 0, 0.6, 0.8], fovy=50)
+    spec.option.timestep = timestep
+    # Sleeping islands: rooted mushrooms at rest drop out of the pipeline (constraint rows
+    # 48 -> 6 in a 50-mushroom scene, mj_step ~2x faster) and wake, exactly as MuJoCo
+    # documents, when the tool touches them or a grip weld joins them to the awake arm (an
+    # actuated tree, which never sleeps). Same picker outcomes (benchmarks/RESULTS.md).
+    spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    return spec
+
+
+def build_world(scene: Any, target: int, robot: RobotConfig, free_radius: float | None,
+                timestep: float, cache: dict[Any, mujoco.MjModel] | None = None,
+                cache_key: Any = None) -> World:
+    """Assemble the world; with ``cache`` and ``cache_key``, the compiled model is kept there
+    and copied (3 ms against 45 ms for a compile), as an episode changes its model (contact
+    masks, weld data)."""
+    n = len(scene.instances)
+    free = free_set(scene, target, free_radius)
+    suction = robot.tool == "suction"
+    if cache is not None and cache_key is not None:
+        if cache_key not in cache:
+            cache[cache_key] = world_spec(scene, free, robot, timestep).compile()
+        m = copy.copy(cache[cache_key])
+    else:
+        m = world_spec(scene, free, robot, timestep).compile()
+    d = mujoco.MjData(m)
+    is_free = np.array([i in free for i in range(n)])
+    terrain = m.geom("terrain").id
+    m.geom_contype[terrain], m.geom_conaffinity[terrain] = ph.SOIL_CONTYPE, ph.SOIL_CONAFFINITY
+    body_ids = np.array([m.body(f"mushroom_{i}").id for i in range(n)])
+    cap_geoms = np.array([m.geom(f"mushroom_{i}_cap").id for i in range(n)])
+    stem_geoms = np.array([m.geom(f"mushroom_{i}_stem").id for i in range(n)])
+    root_eq = np.array([m.equality(f"mushroom_{i}_root").id if i in free else -1 for i in range(n)])
+    is_root_eq = np.zeros(m.neq, bool)
+    is_root_eq[root_eq[root_eq >= 0]] = True
+    geom_mushroom = np.full(m.ngeom, -1)
+    geom_mushroom[cap_geoms] = np.arange(n)
+    geom_mushroom[stem_geoms] = np.arange(n)
+    is_cap = np.zeros(m.ngeom, bool)
+    is_cap[cap_geoms] = True
+    # Free mushrooms touch the robot. Static ones (beyond ``free_radius``) collide with
+    # nothing: out of the broadphase, ~25 % off each physics step (50 mushrooms). KNOWN
+    # SIMPLIFICATION: the tool passes through mushrooms more than free_radius from the target.
+    free_mask = is_free.astype(int)
+    for g in np.concatenate([cap_geoms, stem_geoms]):
+        f = free_mask[geom_mushroom[g]]
+        m.geom_contype[g] = ph.ROOTED_CONTYPE * f
+        m.geom_conaffinity[g] = ph.ROOTED_CONAFFINITY * f
+    # The broadphase prunes with per-body unions of the geom masks: keep them in step.
+    m.body_contype[body_ids] = ph.ROOTED_CONTYPE * free_mask
+    m.body_conaffinity[body_ids] = ph.ROOTED_CONAFFINITY * free_mask
+    m.body_contype[0] |= ph.SOIL_CONTYPE
+    m.body_conaffinity[0] |= ph.SOIL_CONAFFINITY
+    robot_geom = np.zeros(m.ngeom, bool)
+    robot_geom[[g for g in range(m.ngeom) if m.geom(g).name.startswith(PREFIX)]] = True
+    cup_geom = m.geom(PREFIX + CUP_GEOM).id if suction else -1  # -1: the seal test never fires
+    force, torque = m.sensor(PREFIX + WRIST_FORCE), m.sensor(PREFIX + WRIST_TORQUE)
+    socket = 0 if suction else ph.SOCKET_CONAFFINITY
+    return World(
+        model=m, data=d, scene=scene, tool=robot.tool, is_free=is_free,
+        free_ids=np.array(sorted(free)), body_ids=body_ids, cap_geoms=cap_geoms,
+        stem_geoms=stem_geoms,
+        cap_top_sites=np.array([m.site(f"mushroom_{i}_cap_top").id for i in range(n)]),
+        dofadr=np.array([m.jnt_dofadr[m.joint(f"mushroom_{i}_joint").id] if i in free else -1
+                         for i in range(n)]),
+        root_eq=root_eq,
+        grip_eq=np.array([m.equality(f"grip_{i}").id if suction and i in free else -1 for i in range(n)]),
+        is_root_eq=is_root_eq, geom_mushroom=geom_mushroom, is_cap=is_cap, robot_geom=robot_geom,
+        cup_geom=cup_geom, cup_body=m.body(PREFIX + CUP_BODY).id if suction else -1,
+        tool_site=m.site(PREFIX + TOOL_SITE).id, terrain_geom=terrain,
+        arm_qadr=np.array([m.jnt_qposadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS]),
+        arm_dadr=np.array([m.jnt_dofadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS]),
+        wrench_adr=np.r_[force.adr[0]:force.adr[0] + 3, torque.adr[0]:torque.adr[0] + 3],
+        cap_radius=np.array([inst.cap_diameter / 2 for inst in scene.instances]),
+        free_aff=ph.FREE_CONAFFINITY | socket, lifted_aff=ph.LIFTED_CONAFFINITY | socket,
+        cup_mask=(int(m.geom_contype[cup_geom]), int(m.geom_conaffinity[cup_geom])) if suction else (0, 0),
+    )
