@@ -348,7 +348,7 @@ def _cmd_sweep(args: Any) -> int:
     command = "sms3d " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:2] == ["sweep"] else ""
     paths = write_report(rows, args.out, command)
     print(Path(paths["md"]).read_text(encoding="utf-8"))
-    print(f"wrote {paths['csv']}, {paths['png']}, {paths['md']}")
+    print("wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
 
 

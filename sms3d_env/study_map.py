@@ -71,7 +71,9 @@ def tolerance_region(grid: dict[str, Any], within_pp: float = WITHIN_PP) -> list
 def region_sentence(region: list[tuple[float, float]], oracle: float, within_pp: float = WITHIN_PP) -> str:
     if not region:
         return f"no cell is within {within_pp:g} points of the oracle ({100 * oracle:.0f} %)"
-    parts = [f"axis error ≤ {a:g}° while the cap-top error is ≤ {b:g} mm" for b, a in region]
+    # A staircase step that keeps the same axis error is subsumed by the next, larger B.
+    steps = [(b, a) for i, (b, a) in enumerate(region) if i + 1 == len(region) or region[i + 1][1] != a]
+    parts = [f"axis error ≤ {a:g}° while the cap-top error is ≤ {b:g} mm" for b, a in steps]
     return f"within {within_pp:g} points of the oracle ({100 * oracle:.1f} %): " + "; or ".join(parts)
 
 

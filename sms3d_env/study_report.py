@@ -218,7 +218,8 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
     lines = ["# How accurate must the orientation estimate be?", ""]
     if command:
         lines += [f"Reproduce: `{command}`", ""]
-    lines += [f"Answer: the largest orientation error at which the scripted picker's success stays within "
+    picker = ", ".join(sorted({r.get("picker", "scripted") for r in rows}))
+    lines += [f"Answer: the largest orientation error at which the {picker} picker's success stays within "
               f"{WITHIN_PP:g} percentage points of its success with exact (oracle) poses.", "",
               "| physics | subset | oracle success | tolerable error | episodes per error |", "| --- | --- | --- | --- | --- |"]
     for variant in dict.fromkeys(r["variant"] for r in rows):
