@@ -21,20 +21,12 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "egl")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # runs from a checkout
 
-from scipy.stats import binomtest  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 import generator  # noqa: E402
 from sms3d_env.pickers import make_picker_env, parse_picker  # noqa: E402
 from sms3d_env.scripted_picker import run_episode  # noqa: E402
-from sms3d_env.study_report import wilson_interval  # noqa: E402
-
-
-def mcnemar_p(a: list[bool], b: list[bool]) -> float:
-    """Two-sided exact McNemar p-value of paired outcomes ``a`` vs ``b``."""
-    only_a = sum(x and not y for x, y in zip(a, b, strict=True))
-    only_b = sum(y and not x for x, y in zip(a, b, strict=True))
-    return 1.0 if only_a + only_b == 0 else binomtest(only_a, only_a + only_b, 0.5).pvalue
+from sms3d_env.study_report import mcnemar_p, wilson_interval  # noqa: E402
 
 
 def run(picker_text: str, beds: list[int], episodes: int, error: float, seed: int) -> dict:

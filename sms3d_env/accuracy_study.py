@@ -376,9 +376,37 @@ def _cmd_compare(args: Any) -> int:
     except (FileNotFoundError, CorruptFileError) as exc:
         print(f"sms3d sweep-compare: error: {exc}", file=sys.stderr)
         return 2
+    print(picker_comparison(curves))
     plot_pickers(curves, args.out)
     print(f"wrote {args.out}")
     return 0
+
+
+def picker_comparison(curves: dict[str, list[dict[str, Any]]]) -> str:
+    """Markdown: each picker's success per orientation error (no position error, default
+    physics, reachable targets) and the exact McNemar p against the first picker on the episodes
+    both ran (paired by seed)."""
+    from sms3d_env.study_report import axes, mcnemar_p, wilson_interval
+
+    def outcomes(rows: list[dict[str, Any]]) -> dict[float, dict[int, bool]]:
+        by_error: dict[float, dict[int, bool]] = {}
+        for r in rows:
+            if r["reachable"] and r.get("source", "noisy") == "noisy" and r["variant"] == "default" \
+                    and axes(r)[2] == 0.0:
+                by_error.setdefault(r["error_deg"], {})[r["seed"]] = bool(r["success"])
+        return by_error
+
+    first_label, *_ = curves
+    first = outcomes(curves[first_label])
+    lines = [f"| picker | error | success | 95 % CI | McNemar p vs {first_label} |", "| --- | --- | --- | --- | --- |"]
+    for label, rows in curves.items():
+        for error, wins in sorted(outcomes(rows).items()):
+            k, n = sum(wins.values()), len(wins)
+            lo, hi = wilson_interval(k, n)
+            shared = sorted(set(wins) & set(first.get(error, {})))
+            p = mcnemar_p([wins[s] for s in shared], [first[error][s] for s in shared]) if shared else float("nan")
+            lines.append(f"| {label} | {error:g}° | {k}/{n} = {100 * k / n:.1f} % | {100 * lo:.1f}–{100 * hi:.1f} % | {p:.3g} |")
+    return "\n".join(lines)
 
 
 # The flag that sets each field SweepConfig checks, to report a refused value by what was typed.

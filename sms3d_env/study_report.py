@@ -39,6 +39,16 @@ def axes(row: dict[str, Any]) -> tuple[str, int, float]:
             float(row.get("position_error_mm", 0.0)))
 
 
+def mcnemar_p(a: Sequence[bool], b: Sequence[bool]) -> float:
+    """Two-sided exact McNemar p-value of paired outcomes ``a`` vs ``b`` (episode i of each on
+    the same scene): the binomial test of the discordant pairs."""
+    from scipy.stats import binomtest
+
+    only_a = sum(x and not y for x, y in zip(a, b, strict=True))
+    only_b = sum(y and not x for x, y in zip(a, b, strict=True))
+    return 1.0 if only_a + only_b == 0 else float(binomtest(only_a, only_a + only_b, 0.5).pvalue)
+
+
 def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]], bool] = lambda r: True) -> list[dict[str, Any]]:
     """Success rate with its interval and failure-cause counts per (variant, position error,
     orientation error), for rows of one tool and bed size."""

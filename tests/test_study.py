@@ -168,3 +168,12 @@ def test_a_failed_report_leaves_no_earlier_report_behind(tmp_path, monkeypatch):
         write_report(_rows({0.0: 10}), tmp_path)
     assert not any(p.exists() for p in paths.values())
     assert list(tmp_path.iterdir()) == []  # no temporary files either
+
+
+def test_mcnemar_counts_only_discordant_pairs():
+    from sms3d_env.study_report import mcnemar_p
+
+    same = [True, False, True]
+    assert mcnemar_p(same, same) == 1.0
+    # 10 pairs where only the first picker succeeds: p = 2 / 2**10.
+    assert mcnemar_p([True] * 10 + [False] * 5, [False] * 10 + [False] * 5) == pytest.approx(2 / 1024)
