@@ -386,13 +386,15 @@ def picker_comparison(curves: dict[str, list[dict[str, Any]]]) -> str:
     """Markdown: each picker's success per orientation error (no position error, default
     physics, reachable targets) and the exact McNemar p against the first picker on the episodes
     both ran (paired by seed)."""
-    from sms3d_env.study_report import axes, mcnemar_p, wilson_interval
+    from sms3d_env.study_report import axes, base_slice, mcnemar_p, wilson_interval
 
     def outcomes(rows: list[dict[str, Any]]) -> dict[float, dict[int, bool]]:
+        """Per error, seed -> success in the sweep's base slice (first tool and bed size)."""
+        tool, size, position = base_slice(rows)
         by_error: dict[float, dict[int, bool]] = {}
         for r in rows:
             if r["reachable"] and r.get("source", "noisy") == "noisy" and r["variant"] == "default" \
-                    and axes(r)[2] == 0.0:
+                    and axes(r) == (tool, size, position):
                 by_error.setdefault(r["error_deg"], {})[r["seed"]] = bool(r["success"])
         return by_error
 
