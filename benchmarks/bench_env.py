@@ -1,5 +1,5 @@
 """Speed of SMS3DPick-v0: env steps/s (state observations, 50 mushrooms), reset time, and
-steps/s with 64 x 64 RGB-D observations. Anchor: FetchPickAndPlace-v4 ~1,100 steps/s here
+steps/s with 64 x 64 RGB-D observations; SMS3DPickTrain-v0's reset with and without a scene pool. Anchor: FetchPickAndPlace-v4 ~1,100 steps/s here
 (measure it beside this run with bench_fetch.py).
 
 Usage: python benchmarks/bench_env.py [--steps 500]
@@ -43,6 +43,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=500)
     ap.add_argument("--mushrooms", type=int, default=50)
+    ap.add_argument("--resets", type=int, default=20)
     args = ap.parse_args()
     rows = []
     rate, reset_s = measure(args.steps, False, args.mushrooms)
@@ -54,6 +55,23 @@ def main() -> None:
     for name, r, rs in rows:
         print(f"{name:<22}{r:>10.0f}{rs:>12.3f}")
     print("anchor: FetchPickAndPlace-v4 ~1,100 steps/s (state); measure it here with bench_fetch.py")
+    print(f"\nSMS3DPickTrain-v0 reset, {args.mushrooms} mushrooms, {args.resets} resets after a warm-up")
+    print(f"{'beds':<34}{'reset (s)':>12}")
+    for label, kw in (("new bed per reset", {}), ("scene_pool=8, target_rule=random", {"scene_pool": 8, "target_rule": "random"})):
+        print(f"{label:<34}{reset_time(args.mushrooms, args.resets, kw):>12.3f}")
+
+
+def reset_time(n: int, resets: int, kwargs: dict) -> float:
+    """Mean reset time once a pool (if any) is warm: each of its beds and targets seen once."""
+    cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
+    env = gym.make("SMS3DPickTrain-v0", scene_config=cfg, **kwargs)
+    for s in range(3 * kwargs.get("scene_pool", 1)):
+        env.reset(seed=s)
+    t = time.perf_counter()
+    for s in range(resets):
+        env.reset(seed=1000 + s)
+    env.close()
+    return (time.perf_counter() - t) / resets
 
 
 if __name__ == "__main__":
