@@ -1,11 +1,15 @@
 """Dataset files: COCO, determinism across workers/backends, kill-and-resume, errors, readers."""
 
 import errno
+import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -15,10 +19,12 @@ from pycocotools.coco import COCO
 from generator import ConfigError, SceneConfig
 from generator.dataset import (
     CorruptFileError,
+    DatasetOptions,
     DatasetWriteError,
     ManifestMismatchError,
     generate_dataset,
 )
+from generator.dataset import runner as runner_module
 from generator.dataset import writer as writer_module
 from generator.dataset.cli import main as cli_main
 from generator.dataset.readers import InstancePointCloudDataset, read_scene_files
@@ -119,6 +125,159 @@ def test_killed_and_resumed_run_equals_uninterrupted(reference, tmp_path):
     assert not (tmp_path / "coco_train.json").exists()
     assert subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True).returncode == 0
     assert tree_bytes(tmp_path) == tree_bytes(reference)
+
+
+def _process_state(pid: int) -> str | None:
+    """The state letter in /proc/PID/stat (Z = zombie), None if there is no such process."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return None
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry.name))
+        except OSError:  # ended while we looked
+            pass
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads processes from /proc")
+def test_killed_parent_leaves_no_worker_and_resume_is_identical(reference, tmp_path):
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "generator.dataset.cli", "generate", "--out", str(out), "--num-scenes", "4",
+           "--seed", "11", "--num-mushrooms", "8", "--width", "160", "--height", "120", "--no-progress",
+           "--workers", "2"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while True:  # until both workers exist and have written a scene
+        children = _children(proc.pid)
+        workers = [c for c in children if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes()]
+        if len(workers) == 2 and any(out.glob("scene_*/DONE")):
+            break
+        assert proc.poll() is None and time.monotonic() < deadline, "generator ended before its workers wrote"
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 5
+    while any(_process_state(c) not in (None, "Z") for c in children) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    survivors = [c for c in children if _process_state(c) not in (None, "Z")]
+    for pid in survivors:  # do not leave them running if the test fails
+        os.kill(pid, signal.SIGKILL)
+    assert survivors == [], f"processes of the killed run still alive: {survivors} (workers {workers})"
+    assert not (out / "coco_train.json").exists(), "the run finished before it was killed"
+    generate_dataset(out, CFG, 4, seed=11, progress=False)  # resume (CFG is the command's config)
+    assert tree_bytes(out) == tree_bytes(reference)
+
+
+def test_orphaned_worker_watch_exits_when_the_parent_dies():
+    # The portable fallback of _die_with_parent, for systems without prctl(PR_SET_PDEATHSIG).
+    child = ("import os, threading, time; from generator.dataset.runner import _exit_when_orphaned; "
+             "threading.Thread(target=_exit_when_orphaned, args=(os.getppid(), 0.05), daemon=True).start(); "
+             "print(os.getpid(), flush=True); time.sleep(60)")
+    parent = f"import subprocess, sys; subprocess.Popen([sys.executable, '-c', {child!r}]).wait()"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-c", parent], env=env, stdout=subprocess.PIPE, text=True)
+    pid = int(proc.stdout.readline())
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 5
+    while _process_state(pid) not in (None, "Z") and time.monotonic() < deadline:
+        time.sleep(0.05)
+    alive = _process_state(pid) not in (None, "Z")
+    if alive:
+        os.kill(pid, signal.SIGKILL)
+    assert not alive
+
+
+def test_pool_keeps_a_few_scenes_in_flight(monkeypatch):
+    # One future per scene up front would hold a million of them before a million-scene run starts.
+    lock, outstanding, peak = threading.Lock(), [0], [0]
+
+    def finished(_):
+        with lock:
+            outstanding[0] -= 1
+
+    class CountingPool(ThreadPoolExecutor):
+        def __init__(self, max_workers, **_process_pool_arguments):
+            super().__init__(max_workers)
+
+        def submit(self, fn, *args):
+            with lock:
+                outstanding[0] += 1
+                peak[0] = max(peak[0], outstanding[0])
+            future = super().submit(fn, *args)
+            future.add_done_callback(finished)
+            return future
+
+    monkeypatch.setattr(runner_module, "ProcessPoolExecutor", CountingPool)
+    monkeypatch.setattr(runner_module, "_run_one", lambda index, args: "train")
+    updates = []
+    runner_module._run_pool(list(range(2000)), (), 2, updates.append)
+    assert len(updates) == 2000 and peak[0] <= 4
+
+
+def test_start_up_looks_at_the_folders_present_not_every_requested_index(reference, monkeypatch):
+    checked = []
+    real = runner_module.is_complete
+    monkeypatch.setattr(runner_module, "is_complete", lambda folder: checked.append(folder) or real(folder))
+    assert runner_module._complete_scenes(reference, 1_000_000) == [0, 1, 2, 3]
+    assert len(checked) == 4
+
+
+def test_num_scenes_is_capped_by_the_folder_numbering(tmp_path):
+    with pytest.raises(ConfigError, match="num_scenes") as info:
+        generate_dataset(tmp_path / "o", CFG, 1_000_001, progress=False)
+    assert info.value.field == "num_scenes" and not (tmp_path / "o").exists()
+
+
+def _without_manifest(reference: Path, out: Path) -> dict[str, bytes]:
+    shutil.copytree(reference, out)
+    for name in ("manifest.json", "coco_train.json", "coco_val.json", "coco_test.json"):
+        (out / name).unlink()
+    shutil.rmtree(out / "scene_000003")
+    return tree_bytes(out)
+
+
+@pytest.mark.parametrize(("changes", "setting"), [
+    ({"seed": 12}, "seed (11 there, 12 requested)"),
+    ({"config": CFG.replace(placement__num_mushrooms=9)}, "config.placement.num_mushrooms (8 there, 9 requested)"),
+    ({"options": DatasetOptions(shadows=True)}, "options.shadows (false there, true requested)"),
+])
+def test_resume_without_manifest_checks_every_scene(reference, tmp_path, changes, setting):
+    out = tmp_path / "d"
+    before = _without_manifest(reference, out)
+    run = {"config": CFG, "seed": 11, "options": None, **changes}
+    with pytest.raises(ManifestMismatchError) as info:
+        generate_dataset(out, run["config"], 4, run["seed"], options=run["options"], progress=False)
+    assert str(out / "scene_000000") in str(info.value) and setting in str(info.value)
+    assert tree_bytes(out) == before  # refused before anything was written
+
+
+def test_resume_without_manifest_with_the_same_settings_completes(reference, tmp_path):
+    out = tmp_path / "d"
+    _without_manifest(reference, out)
+    generate_dataset(out, CFG, 4, seed=11, progress=False)
+    assert tree_bytes(out) == tree_bytes(reference)
+
+
+def test_scenes_the_manifest_does_not_list_are_checked(reference, tmp_path):
+    generate_dataset(tmp_path / "other", CFG, 1, seed=5, progress=False)
+    out = tmp_path / "d"
+    shutil.copytree(reference, out)
+    shutil.rmtree(out / "scene_000003")  # as if the manifest was written before scene 3 was done
+    shutil.copytree(tmp_path / "other" / "scene_000000", out / "scene_000003")
+    manifest = json.loads((out / "manifest.json").read_text())
+    manifest["scenes"] = [e for e in manifest["scenes"] if e["index"] != 3]
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ManifestMismatchError, match="scene_000003: this scene was made with different seed"):
+        generate_dataset(out, CFG, 4, seed=11, progress=False)
 
 
 def test_disk_full_leaves_nothing_marked_complete_and_resume_recovers(reference, tmp_path, monkeypatch):

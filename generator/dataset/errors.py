@@ -34,4 +34,5 @@ class CorruptFileError(DatasetError):
 
 
 class ManifestMismatchError(DatasetError):
-    """Resuming into a folder whose manifest was written with other settings."""
+    """Resuming into a folder whose manifest, or one of whose scenes (by its ``scene.json``), was
+    made with other settings; the message names the folder or file and each differing setting."""

@@ -1,32 +1,46 @@
 """Generate a dataset: many seeded scenes in parallel, resumable, then COCO files and a manifest.
 
 Scene ``i`` depends only on (config, options, run seed, i): the same files come out whatever the
-number of workers or backend. Finished scenes (folders with ``DONE``) are skipped on a re-run;
-``*.tmp`` folders left by a killed run are removed and redone.
+number of workers or backend. Finished scenes (folders with ``DONE``) are skipped on a re-run, once
+their ``scene.json`` shows they were made with the requested settings; ``*.tmp`` folders left by a
+killed run are removed and redone. Pool workers die with the process that started them.
 """
 
 from __future__ import annotations
 
 import atexit
+import ctypes
 import errno
+import itertools
 import json
 import multiprocessing
 import os
 import platform
 import shutil
+import signal
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterable
-from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from generator.config import SceneConfig
+from generator.config import SceneConfig, require_int
 from generator.dataset.coco import merge_split
-from generator.dataset.errors import DatasetWriteError, ManifestMismatchError
+from generator.dataset.errors import CorruptFileError, DatasetWriteError, ManifestMismatchError
 from generator.dataset.options import DatasetOptions
 from generator.dataset.seeds import SPLITS, realism_rng, scene_seed, split_of
-from generator.dataset.writer import _write_bytes, dumps, is_complete, scene_dirname, write_scene
+from generator.dataset.writer import (
+    MAX_SCENES,
+    SCENE_DIR,
+    _write_bytes,
+    dumps,
+    is_complete,
+    scene_dirname,
+    write_scene,
+)
 
 MANIFEST = "manifest.json"
 FORMAT_VERSION = 1
@@ -63,7 +77,7 @@ def produce_scene(out_dir: str, index: int, config: dict[str, Any], options: dic
     rng = realism_rng(run_seed, index)
     frame = _renderer(cfg.camera.height, cfg.camera.width).render(scene, opts, rng)
     split = split_of(run_seed, index, opts.split_ratios)
-    write_scene(Path(out_dir), index, scene, frame, split)
+    write_scene(Path(out_dir), index, scene, frame, split, run_seed, options)
     return split
 
 
@@ -91,19 +105,54 @@ def _prepare_out_dir(out: Path) -> None:
         raise DatasetWriteError(out, f"output folder is not writable ({exc.strerror or exc})") from exc
 
 
-def _check_manifest(out: Path, key: dict[str, Any]) -> None:
+def _differences(old: Any, new: Any, prefix: str = "") -> list[str]:
+    """The settings in which two JSON values differ, each as ``name (old there, new requested)``,
+    recursing into objects so that a name is as precise as ``config.placement.num_mushrooms``."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        return [d for k in sorted(set(old) | set(new))
+                for d in _differences(old.get(k), new.get(k), f"{prefix}.{k}" if prefix else k)]
+    old, new = json.loads(dumps(old)), json.loads(dumps(new))  # tuples and lists compare equal
+    if old == new:
+        return []
+    short = [text if len(text) <= 40 else text[:37] + "..." for text in (dumps(old), dumps(new))]
+    return [f"{prefix} ({short[0]} there, {short[1]} requested)"]
+
+
+def _check_manifest(out: Path, key: dict[str, Any]) -> set[int]:
+    """Refuse a manifest written with other settings; returns the scenes it lists (made with
+    this run's settings, so they need no further check)."""
     path = out / MANIFEST
     if not path.exists():
-        return
+        return set()
     try:
         old = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ManifestMismatchError(f"{path}: unreadable manifest ({exc}); remove it or use another --out") from exc
-    old_key = {k: old.get(k) for k in key}
-    if json.loads(dumps(old_key)) != json.loads(dumps(key)):
-        differing = sorted(k for k in key if json.loads(dumps(old.get(k))) != json.loads(dumps(key[k])))
+        listed = {int(e["index"]) for e in old.get("scenes", [])}
+    except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise ManifestMismatchError(f"{path}: unreadable manifest ({exc}); remove it (every scene is then "
+                                    "checked against its scene.json) or use another --out") from exc
+    differing = _differences({k: old.get(k) for k in key}, key)
+    if differing:
         raise ManifestMismatchError(f"{path}: existing dataset was made with different {', '.join(differing)}; "
                                     "use another --out or the same settings to resume")
+    return listed
+
+
+def _check_scenes(out: Path, key: dict[str, Any], indices: Iterable[int]) -> None:
+    """Refuse to resume beside complete scenes whose ``scene.json`` records other settings."""
+    expected = {k: key[k] for k in ("seed", "config", "options")}
+    for i in indices:
+        path = out / scene_dirname(i) / "scene.json"
+        try:
+            record = json.loads(path.read_bytes())
+            dataset = record["dataset"]
+            recorded = {"seed": dataset.get("run_seed"), "config": record.get("config"),
+                        "options": dataset.get("options")}
+        except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
+            raise CorruptFileError(path, f"cannot read the settings this scene was made with ({exc})") from exc
+        differing = _differences(recorded, expected)
+        if differing:
+            raise ManifestMismatchError(f"{path.parent}: this scene was made with different {', '.join(differing)}; "
+                                        "use another --out or the same settings to resume")
 
 
 def _write_json_atomic(path: Path, obj: Any) -> None:
@@ -113,7 +162,10 @@ def _write_json_atomic(path: Path, obj: Any) -> None:
 
 
 def _complete_scenes(out: Path, num_scenes: int) -> list[int]:
-    return [i for i in range(num_scenes) if is_complete(out / scene_dirname(i))]
+    """Indices below ``num_scenes`` with a complete folder, from one listing of ``out``: one
+    check per folder present, not per scene requested, so a huge ``num_scenes`` starts at once."""
+    indices = (int(m[1]) for m in map(SCENE_DIR.fullmatch, os.listdir(out)) if m)
+    return sorted(i for i in indices if i < num_scenes and is_complete(out / scene_dirname(i)))
 
 
 def _write_outputs(out: Path, key: dict[str, Any], num_scenes: int, status: str) -> dict[str, Any]:
@@ -152,19 +204,20 @@ def generate_dataset(out_dir: str | os.PathLike[str], config: SceneConfig, num_s
     ``DatasetWriteError`` (folder not writable, disk full, a scene failed) and
     ``ManifestMismatchError`` (folder holds a dataset made with other settings)."""
     options = options or DatasetOptions()
-    if not isinstance(num_scenes, int) or num_scenes < 1:
-        raise ValueError(f"num_scenes must be an integer >= 1, got {num_scenes!r}")
-    if not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    require_int("num_scenes", num_scenes, 1, MAX_SCENES)
+    require_int("seed", seed, 0)
     if backend not in ("process", "ray"):
         raise ValueError(f"backend must be 'process' or 'ray', got {backend!r}")
     out = Path(out_dir)
     _prepare_out_dir(out)
     key = _run_key(config, options, seed)
-    _check_manifest(out, key)
+    listed = _check_manifest(out, key)
     for tmp in sorted(out.glob("scene_*.tmp")):  # partial scenes of an interrupted run
         shutil.rmtree(tmp)
-    todo = [i for i in range(num_scenes) if not is_complete(out / scene_dirname(i))]
+    done = _complete_scenes(out, num_scenes)
+    _check_scenes(out, key, (i for i in done if i not in listed))
+    done_set = set(done)
+    todo = [i for i in range(num_scenes) if i not in done_set]
     _write_outputs(out, key, num_scenes, "incomplete")
 
     args = (str(out), config.to_dict(), options.to_dict(), seed)
@@ -202,10 +255,15 @@ def _progress(total: int, initial: int, enabled: bool) -> Any:
 
 def _run_pool(todo: list[int], args: tuple[Any, ...], workers: int, update: Callable[[int], Any]) -> None:
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
-        pending = {pool.submit(_run_one, i, args) for i in todo}
+    queue = iter(todo)
+    # A few scenes in flight per worker, not one future per scene: a million-scene run would
+    # otherwise hold a million futures before the first scene starts.
+    in_flight = 2 * workers
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init,
+                             initargs=(os.getpid(),)) as pool:
+        pending = {pool.submit(_run_one, i, args) for i in itertools.islice(queue, in_flight)}
         while pending:
-            finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for fut in finished:
                 exc = fut.exception()
                 if exc is not None:
@@ -213,10 +271,36 @@ def _run_pool(todo: list[int], args: tuple[Any, ...], workers: int, update: Call
                         other.cancel()
                     raise exc
                 update(1)
+            pending |= {pool.submit(_run_one, i, args) for i in itertools.islice(queue, len(finished))}
 
 
-def _worker_init() -> None:
+_PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
+
+
+def _worker_init(parent_pid: int) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
+    _die_with_parent(parent_pid)
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """End this worker when ``parent_pid`` dies, even by SIGKILL, so that no orphan keeps
+    writing scenes beside a resumed run (a pool worker otherwise waits on its queue forever).
+
+    On Linux the kernel kills the worker (``PR_SET_PDEATHSIG``), even in the middle of a render
+    that holds the GIL; the parent may have died before that took effect, hence the ``getppid``
+    check after it. Elsewhere a daemon thread polls for the parent's death."""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+    else:
+        threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
+
+
+def _exit_when_orphaned(parent_pid: int, interval: float = 0.2) -> None:
+    while os.getppid() == parent_pid:  # an orphan is re-parented to init or a subreaper
+        time.sleep(interval)
+    os._exit(1)
 
 
 def _run_ray(todo: list[int], args: tuple[Any, ...], workers: int, update: Callable[[int], Any]) -> None:

@@ -4,7 +4,9 @@ their SHA-256 sums is written last, then the folder is renamed to ``scene_XXXXXX
 Per scene: ``rgb.png``; ``depth.png`` (uint16 millimetres, 0 = invalid); ``labels_mushroom.png``
 and ``labels_cap.png`` (uint16 visible instance labels, 0 background, instance id + 1);
 ``amodal_caps.json`` (instance id -> COCO RLE of the cap alone); ``annotations.json`` (COCO
-annotations of this scene); ``scene.json`` (``Scene.to_dict()`` plus ``camera`` and ``dataset``).
+annotations of this scene); ``scene.json`` (``Scene.to_dict()`` plus ``camera`` and ``dataset``;
+``dataset`` records the run seed and dataset options, so a resumed run can check every scene
+against the settings it was asked for, manifest or not).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 from pathlib import Path
 from typing import Any
@@ -27,6 +30,9 @@ DEPTH_SCALE = 0.001  # metres per depth PNG unit
 FILES = ("rgb.png", "depth.png", "labels_mushroom.png", "labels_cap.png", "amodal_caps.json",
          "annotations.json", "scene.json")
 DONE = "DONE"
+# Scene folders are numbered with six digits, so that their names sort in index order.
+MAX_SCENES = 1_000_000
+SCENE_DIR = re.compile(r"scene_(\d{6})")
 
 
 def scene_dirname(index: int) -> str:
@@ -74,17 +80,20 @@ def camera_dict(frame: Frame) -> dict[str, Any]:
     }
 
 
-def scene_record(scene: Scene, frame: Frame, index: int, split: str) -> dict[str, Any]:
+def scene_record(scene: Scene, frame: Frame, index: int, split: str, run_seed: int,
+                 options: dict[str, Any]) -> dict[str, Any]:
     record = scene.to_dict()
     record["camera"] = camera_dict(frame)
-    record["dataset"] = {"index": index, "split": split, "realism": frame.realism,
-                         "label_offset": 1, "files": list(FILES)}
+    record["dataset"] = {"index": index, "split": split, "realism": frame.realism, "run_seed": run_seed,
+                         "options": options, "label_offset": 1, "files": list(FILES)}
     return record
 
 
-def write_scene(out_dir: Path, index: int, scene: Scene, frame: Frame, split: str) -> Path:
-    """Write scene ``index`` into ``out_dir``; returns the final folder. On any error the
-    temporary folder is removed (if possible) and the error propagates."""
+def write_scene(out_dir: Path, index: int, scene: Scene, frame: Frame, split: str, run_seed: int,
+                options: dict[str, Any]) -> Path:
+    """Write scene ``index`` of the run ``run_seed`` (made with the dataset ``options``) into
+    ``out_dir``; returns the final folder. On any error the temporary folder is removed (if
+    possible) and the error propagates."""
     final = out_dir / scene_dirname(index)
     tmp = out_dir / (scene_dirname(index) + ".tmp")
     if tmp.exists():
@@ -104,7 +113,7 @@ def write_scene(out_dir: Path, index: int, scene: Scene, frame: Frame, split: st
                           "width": w, "height": h, "split": split},
                 "annotations": scene_annotations(frame.labels_mushroom, frame.labels_cap, amodal, scene.instances),
             }).encode(),
-            "scene.json": dumps(scene_record(scene, frame, index, split)).encode(),
+            "scene.json": dumps(scene_record(scene, frame, index, split, run_seed, options)).encode(),
         }
         for name in FILES:
             _write_bytes(tmp / name, contents[name])
