@@ -8,6 +8,9 @@ import os
 import sys
 from collections.abc import Sequence
 
+from generator.cli_types import image_side, output_path
+from generator.config import MAX_IMAGE_SIDE, MIN_IMAGE_SIDE
+
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 # Modules that add their own subcommands with ``register(subparsers)``; named here rather than
@@ -73,14 +76,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     preview = sub.add_parser("preview", help="render one generated scene to a PNG (overhead + oblique view)")
     add_scene_arguments(preview)
-    preview.add_argument("--out", default="scene.png", help="PNG to write (default scene.png)")
-    preview.add_argument("--width", type=int, default=640)
-    preview.add_argument("--height", type=int, default=480)
+    preview.add_argument("--out", type=output_path, default="scene.png", help="PNG to write (default scene.png)")
+    sides = f"{MIN_IMAGE_SIDE}-{MAX_IMAGE_SIDE}"
+    preview.add_argument("--width", type=image_side, default=640, help=f"width of each view ({sides}, default 640)")
+    preview.add_argument("--height", type=image_side, default=480, help=f"height ({sides}, default 480)")
     preview.set_defaults(func=_cmd_preview)
 
     scene = sub.add_parser("scene", help="write one generated scene as MJCF (scene.xml + assets) and scene.json")
     add_scene_arguments(scene)
-    scene.add_argument("--out", required=True, help="output folder")
+    scene.add_argument("--out", type=output_path, required=True, help="output folder")
     scene.set_defaults(func=_cmd_scene)
 
     for module in SUBCOMMAND_MODULES:

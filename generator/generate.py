@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from generator.config import SceneConfig
+from generator.errors import ConfigError
 from generator.placement import PlacementStats, place_mushrooms
 from generator.scene import Scene
 from generator.terrain import generate_terrain
@@ -19,8 +20,8 @@ def scene_rng(seed: int) -> tuple[np.random.Generator, np.random.Generator]:
 def generate_scene_with_stats(config: SceneConfig | None = None, seed: int = 0) -> tuple[Scene, PlacementStats]:
     """Like ``generate_scene`` and also returns how placement went."""
     config = config or SceneConfig()
-    if not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError("seed", f"must be an integer >= 0, got {seed!r}")
     terrain_rng, placement_rng = scene_rng(int(seed))
     terrain = generate_terrain(config.terrain, terrain_rng)
     instances, stats = place_mushrooms(config.placement, terrain, placement_rng)

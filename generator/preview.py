@@ -10,6 +10,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco  # noqa: E402
 
+from generator.config import require_image_side  # noqa: E402
 from generator.files import save_rgb_png  # noqa: E402
 from generator.gl import open_renderer
 from generator.mjcf import scene_to_model  # noqa: E402
@@ -18,6 +19,8 @@ from generator.scene import Scene  # noqa: E402
 
 def render_views(scene: Scene, width: int = 640, height: int = 480) -> np.ndarray:
     """The overhead camera's RGB image beside an oblique view, as one (H, 2W, 3) uint8 image."""
+    require_image_side("width", width)
+    require_image_side("height", height)
     model = scene_to_model(scene, shadows=True)
     model.vis.global_.offwidth = max(model.vis.global_.offwidth, width)
     model.vis.global_.offheight = max(model.vis.global_.offheight, height)

@@ -9,6 +9,7 @@ import argparse
 import os
 import sys
 
+from generator.cli_types import output_path
 from generator.errors import ConfigError
 
 
@@ -24,8 +25,8 @@ def _ratios(text: str) -> tuple[float, float, float]:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     gen = subparsers.add_parser("generate", help="render a dataset of synthetic mushroom beds")
-    gen.add_argument("--out", required=True, help="output folder (re-running resumes)")
-    gen.add_argument("--num-scenes", type=int, required=True)
+    gen.add_argument("--out", type=output_path, required=True, help="output folder (re-running resumes)")
+    gen.add_argument("--num-scenes", type=int, required=True, help="scenes in the dataset (1-1000000)")
     gen.add_argument("--species", choices=["white", "brown", "mixed"], default=None)
     gen.add_argument("--num-mushrooms", type=int, default=None, help="mushrooms requested per scene (1-100)")
     gen.add_argument("--workers", type=int, default=1)
@@ -48,7 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     show = subparsers.add_parser("show", help="draw one scene's masks and cap boxes on its RGB image")
     show.add_argument("dir", help="dataset folder")
     show.add_argument("--scene", type=int, required=True, help="scene index")
-    show.add_argument("--out", required=True, help="PNG to write")
+    show.add_argument("--out", type=output_path, required=True, help="PNG to write")
     show.add_argument("--labels", choices=["mushroom", "cap", "amodal"], default="mushroom")
     show.set_defaults(func=run_show)
 
