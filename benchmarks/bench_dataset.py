@@ -1,7 +1,7 @@
 """Dataset generation speed: scenes per second at 640 x 480 with all outputs (RGB, depth, modal
 and amodal masks, scene.json, COCO, manifest), for 10/50/100 requested mushrooms and 1/2 workers.
 
-Anchor (shared/reference/anchors.md): the public SMS3D generator takes 2.51 / 8.43 / 12.24 s per
+Anchor (docs/anchors.md): the public SMS3D generator takes 2.51 / 8.43 / 12.24 s per
 scene at 10 / 50 / 100 requested mushrooms (1 process, 1024 x 1024); the goal is >= 10x faster.
 
     python benchmarks/bench_dataset.py [--scenes 6] [--counts 10 50 100] [--workers 1 2] [--size 640x480]

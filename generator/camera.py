@@ -9,7 +9,7 @@ import numpy as np
 
 from generator.config import CameraConfig
 
-# Focal length in pixels at 640 x 480 (shared/reference/harvest-physics.md).
+# Focal length in pixels at 640 x 480 (docs/physics.md, camera and depth sensor).
 FOCAL_PX_640x480 = {"d405": 382.0, "d435": 430.0}
 # OpenCV camera frame (x right, y down, z forward) from MuJoCo's (x right, y up, looking along -z).
 MUJOCO_TO_OPENCV = np.diag([1.0, -1.0, -1.0])

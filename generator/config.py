@@ -1,7 +1,8 @@
 """Scene configuration: frozen dataclasses validated on construction.
 
 Every default is the SMS3D paper's (section 3.1, Algorithm 1) translated to metres, or the
-public code's reading of it where the paper gives no number (see ``shared/reference``).
+public code's reading of it where the paper gives no number; ``docs/physics.md`` gives the
+sources of the physical values.
 """
 
 from __future__ import annotations

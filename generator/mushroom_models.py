@@ -3,7 +3,7 @@
 A model's frame has its origin at the centre of the stem base and +z along the stem axis, from
 the stem base towards the cap. Each model is the union (a real mesh boolean) of two watertight
 solids of revolution: a stem and a cap with a gill underside, both slightly out of round.
-Proportions follow ``shared/reference/harvest-physics.md``: stems about a third of the cap
+Proportions follow ``docs/physics.md`` (measured mushrooms): stems about a third of the cap
 diameter thick, caps about 0.55 of their diameter high, caps out of round by up to ~10 %.
 """
 

@@ -1,7 +1,7 @@
 """Picking physics: rooted mushrooms, root wrench and detachment, suction seal, grip, bruising.
 
 All numbers live in ``PickPhysicsParams`` (:mod:`sms3d_env.physics_params`). Sources:
-``shared/reference/harvest-physics.md``; where it reports that no source exists, the default is an
+``docs/physics.md``; where it reports that no source exists, the default is an
 ASSUMPTION and says so.
 """
 

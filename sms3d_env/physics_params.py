@@ -22,21 +22,21 @@ class PickPhysicsParams:
             about 2 N of side force on a cap 4 cm above the root, 8x what gravity gives a 50 g
             mushroom tilted by 30 degrees. It exceeds the seal's bending capacity (holding force
             x a / 2 = 0.031 N m), so bending alone loses the grip before it detaches, as the
-            twist-first methods in harvest-physics.md imply. (0.02 N m, the earlier value, is
+            twist-first methods in docs/physics.md imply. (0.02 N m, the earlier value, is
             0.5 N at the cap: a cup's approach alone uprooted mushrooms.)
         twist_torque: torque about the stem that detaches (N m). ASSUMPTION (no source); twisting
             detaches most easily, as pickers are told ("twist, do not pull").
-        vacuum: suction vacuum (Pa), 20 kPa as in harvest-physics.md.
-        cup_radius: cup radius (m), 10 mm (a 20 mm cup) as in harvest-physics.md.
+        vacuum: suction vacuum (Pa), 20 kPa as in docs/physics.md.
+        cup_radius: cup radius (m), 10 mm (a 20 mm cup) as in docs/physics.md.
         seal_angle_deg: largest angle between the cup axis and the cap surface normal at the
             contact that still seals. ASSUMPTION: a 10 mm cup tilted 20 degrees lifts one rim edge
-            by 2a sin(20) = 6.8 mm (harvest-physics.md [derived]), about a bellows stroke.
+            by 2a sin(20) = 6.8 mm (docs/physics.md, derived), about a bellows stroke.
         seal_region: the contact must lie within this fraction of the cap radius from the stem
             axis (the cap top, not its softer, curved rim). ASSUMPTION.
         seal_force: cup-on-cap normal force needed to form a seal (N). ASSUMPTION.
         shear_friction: shear capacity of the seal as a fraction of the holding force.
             ASSUMPTION (rubber on a moist cap).
-        bruise_force: cap contact normal force that bruises (N). ASSUMPTION: harvest-physics.md
+        bruise_force: cap contact normal force that bruises (N). ASSUMPTION: docs/physics.md
             reports no numeric bruising threshold.
         disturb_tolerance: a neighbour moved further than this (m) counts as disturbed. ASSUMPTION.
         lift_height: height the target must be lifted above its starting cap top (m). ASSUMPTION.

@@ -68,14 +68,14 @@ class RobotConfig:
         mount_yaw_deg: base rotation about world z.
         tool: ``"suction"`` (default) or ``"hand"`` (the Jaco 3-finger hand on finger position
             actuators).
-        cup_radius: suction cup radius (m), 10 mm as in harvest-physics.md (20 mm cup).
+        cup_radius: suction cup radius (m), 10 mm as in docs/physics.md (20 mm cup).
         tube_length: length of the tube between the wrist flange and the cup (m). ASSUMPTION.
         kp_large, kp_small: position gains of the shoulder/elbow and wrist actuators (N m/rad).
             ASSUMPTION chosen for ~50 ms tracking with the model's armature.
         force_large, force_small: actuator torque limits (N m). ASSUMPTION near Jaco's ratings.
         finger_kp, finger_force: finger position gain (N m/rad) and torque limit (N m).
             ASSUMPTION: about 4 N at a fingertip 6 cm from its joint, above the 3.2 N shear force
-            that grips and twists a mushroom (harvest-physics.md), far below the bruising force.
+            that grips and twists a mushroom (docs/physics.md), far below the bruising force.
         finger_damping, finger_armature: finger joint damping (N m s/rad) and armature (kg m^2).
             ASSUMPTION replacing dm_control's 0.75 and 0.1, which with this torque would close a
             finger in ~6 s and hit a cap like a 1.4 kg mass: now ~2.4 rad/s, 0.3 kg at the tip.

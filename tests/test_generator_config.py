@@ -249,3 +249,13 @@ def test_bad_config_files_fail_the_cli_and_leave_nothing(entry):
                 assert main([*argv, "--config", str(config), "--out", str(Path(tmp) / "out")]) == 2
             assert field in err.getvalue() and "Traceback" not in err.getvalue()
             assert sorted(p.name for p in Path(tmp).iterdir()) == ["c.json"]
+
+
+@pytest.mark.parametrize("name", ["depth_noise_subpixel", "edge_threshold", "edge_hole_probability",
+                                  "camera_height_jitter", "camera_tilt_jitter_deg"])
+def test_realism_numbers_refuse_booleans(name):
+    from generator.dataset.options import RealismOptions
+
+    with pytest.raises(ConfigError) as info:
+        RealismOptions(**{name: True})
+    assert info.value.field == f"realism.{name}"

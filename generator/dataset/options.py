@@ -8,9 +8,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from generator.config import is_number
 from generator.errors import ConfigError
 
-# RealSense-like stereo baselines in metres (shared/reference/harvest-physics.md).
+# RealSense-like stereo baselines in metres (docs/physics.md, cameras).
 STEREO_BASELINE_M = {"d405": 0.018, "d435": 0.050}
 
 
@@ -32,10 +33,10 @@ class RealismOptions:
     def __post_init__(self) -> None:
         for name in ("depth_noise_subpixel", "edge_threshold", "camera_height_jitter", "camera_tilt_jitter_deg"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            if not is_number(v) or not math.isfinite(v) or v < 0:
                 raise ConfigError(f"realism.{name}", f"must be a finite number >= 0, got {v!r}")
         p = self.edge_hole_probability
-        if not isinstance(p, (int, float)) or not 0 <= p <= 1:
+        if not is_number(p) or not 0 <= p <= 1:
             raise ConfigError("realism.edge_hole_probability", f"must be in [0, 1], got {p!r}")
         if self.camera_tilt_jitter_deg > 30:
             raise ConfigError("realism.camera_tilt_jitter_deg", "must be <= 30")
