@@ -48,7 +48,7 @@ def parse_picker(text: str) -> PickerSpec:
 
 def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     """``(env, picker)``: the env the picker was trained on (``env_kwargs`` added) and the picker,
-    a callable ``obs -> action``."""
+    a callable ``obs -> action``. A learned picker sets torch to one intra-op thread."""
     from sms3d_env.training import SHIPPED_POLICY, PolicyActor, _make_env
 
     if spec.kind == "scripted":
@@ -56,6 +56,12 @@ def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
 
         env = _make_env("SMS3DPick-v0", **env_kwargs)
         return env, ScriptedPicker.for_env(env)
+    import torch
+
+    # Per-step inference of a small MLP: more intra-op threads only add overhead, and the
+    # study's worker processes would oversubscribe the cores (2 workers x 2 threads on 2 cores
+    # ran the policy sweep ~2.5x slower).
+    torch.set_num_threads(1)
     actor = PolicyActor(spec.path or SHIPPED_POLICY)
     env = _make_env(actor.env_id, actor.residual_scale, **{**env_kwargs, **actor.env_options})
     return env, actor
