@@ -82,15 +82,20 @@ def _perception_cloud(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             and r.get("cap_top_error_mm") is not None]
 
 
-def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, variant: str = "default") -> None:
+def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, variant: str | None = None) -> None:
     """Heat map of success over (orientation error, cap-top error), each cell labelled with its
     success and 95 % half-width, iso-lines at the oracle minus 2, 5 and 10 points, and the
-    perception source's measured (axis, cap-top) errors as a cloud with its own success."""
+    perception source's measured (axis, cap-top) errors as a cloud with its own success.
+    ``variant``: the physics variant drawn (default: "default" if the sweep ran it, else its
+    first)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    if variant is None:
+        variants = list(dict.fromkeys(r["variant"] for r in rows if r.get("source", "noisy") == "noisy"))
+        variant = "default" if "default" in variants else variants[0]
     grid = success_grid(rows, variant)
     e, p, s = np.array(grid["errors_deg"]), np.array(grid["positions_mm"]), 100 * grid["success"]
     fig, ax = plt.subplots(figsize=(8, 5.5))
@@ -118,7 +123,7 @@ def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, variant: str = "d
         ax.set_title(f"Success (%, ± 95 % half-width); perception {100 * picked.mean():.0f} % of {len(cloud)}")
         ax.legend(fontsize=7, loc="upper right")
     else:
-        ax.set_title("Pick success (%, ± 95 % half-width) over orientation × cap-top error")
+        ax.set_title(f"Pick success (%, ± 95 % half-width) over orientation × cap-top error ({variant})")
     ax.set_xticks(range(len(e)), [f"{v:g}" for v in e])
     ax.set_yticks(range(len(p)), [f"{v:g}" for v in p])
     ax.set_xlabel("orientation error θ (degrees, perpendicular to the stem)")

@@ -133,3 +133,13 @@ def test_a_sweep_killed_with_sigkill_resumes_to_the_same_csv(tmp_path):
     assert 1 <= done < 8 and not (killed / "sweep.csv").exists()
     subprocess.run(cmd + ["--out", str(killed)] + args, check=True, capture_output=True)
     assert (killed / "sweep.csv").read_bytes() == (whole / "sweep.csv").read_bytes()
+
+
+def test_a_map_of_sensitivity_variants_only_draws_the_first(tmp_path):
+    # `sms3d sweep --variants tight_seal weak_root --position-errors-mm ...` ran no "default".
+    rows = _cell_rows(GRID)
+    for r in rows:
+        r["variant"] = "tight_seal"
+    paths = write_report(rows, tmp_path)
+    assert paths["map"].stat().st_size > 10_000
+    assert "| tight_seal | all reachable targets |" in paths["md"].read_text()
