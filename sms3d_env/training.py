@@ -401,8 +401,9 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
     """Success of a saved policy over seeded episodes with oracle (0 deg) or noisy target poses.
 
     ``model_path`` None: the shipped policy. The env is the id and options the policy was trained
-    with (``config.json`` beside the model) on ``num_mushrooms``-mushroom beds (default 25, the
-    registered env's). Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for
+    with (``config.json`` beside the model) on ``num_mushrooms``-mushroom beds (default: the
+    single bed size it was trained on, else 25, the registered env's — so the shipped policy,
+    trained on 10 and 25, is evaluated on 25). Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for
     every model and pose error.
 
     Returns ``{"episodes", "successes", "success_rate", "ci95": (lo, hi), "reachable",
@@ -422,7 +423,9 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
                                       or num_mushrooms < 1):
         raise ValueError(f"num_mushrooms must be an integer >= 1, got {num_mushrooms!r}")
     actor = PolicyActor(SHIPPED_POLICY if model_path is None else model_path, algo, deterministic)
-    kw = env_kwargs(num_mushrooms or 25, "noisy" if pose_error_deg > 0 else "oracle", pose_error_deg,
+    trained_on = actor.saved.get("num_mushrooms")
+    num_mushrooms = num_mushrooms or (trained_on if isinstance(trained_on, int) else 25)
+    kw = env_kwargs(num_mushrooms, "noisy" if pose_error_deg > 0 else "oracle", pose_error_deg,
                     0.0, actor.saved.get("reward_type", "dense"),
                     max_episode_steps or actor.saved.get("max_episode_steps", 250))
     if actor.env_id != "SMS3DPick-v0":
@@ -467,7 +470,7 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
         "failure_causes": dict(sorted(causes.items())),
         "target_detached_at_end": detached, "target_held_at_end": held, "mean_return": float(np.mean(returns)),
         "mean_steps": float(np.mean(lengths)), "per_episode": per_episode, "env_id": actor.env_id,
-        "env_options": actor.env_options, "num_mushrooms": num_mushrooms or 25,
+        "env_options": actor.env_options, "num_mushrooms": num_mushrooms,
         "pose_error_deg": float(pose_error_deg), "seed": seed,
     }
 
@@ -590,7 +593,8 @@ def register(subparsers: Any) -> None:
     e.add_argument("--episodes", "--eval-episodes", dest="episodes", type=int, default=30)
     e.add_argument("--pose-error-deg", type=float, default=0.0, help="0: oracle poses")
     e.add_argument("--seed", type=int, default=1_000_000, help="first episode seed")
-    e.add_argument("--num-mushrooms", type=int, default=None, help="mushrooms per bed (default 25)")
+    e.add_argument("--num-mushrooms", type=int, default=None,
+                   help="mushrooms per bed (default: the training bed size, else 25)")
     e.add_argument("--json", default=None, help="also write the result here")
     e.set_defaults(func=_cmd_eval)
 
