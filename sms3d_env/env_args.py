@@ -16,7 +16,8 @@ SUCTION_MODES = ("momentary", "latched")
 RENDER_MODES = ("rgb_array", "depth_array")
 
 
-def _non_negative_int(name: str, v: Any, least: int = 0) -> None:
+def _int_at_least(name: str, v: Any, least: int = 0) -> None:
+    """ValueError unless ``v`` is an integer (not a bool) >= ``least``."""
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
         raise ValueError(f"{name} must be an integer >= {least}, got {v!r}")
 
@@ -38,16 +39,16 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
     if reward_type not in REWARD_TYPES:
         raise ValueError(f"reward_type must be one of {REWARD_TYPES}, got {reward_type!r}")
     _finite("control_dt", control_dt, 1e-6, math.inf, "a finite number > 0 (s)")
-    _non_negative_int("substeps", substeps, 1)
+    _int_at_least("substeps", substeps, 1)
     if tool not in TOOLS:
         raise ValueError(f"tool must be one of {TOOLS}, got {tool!r}")
     if suction_mode not in SUCTION_MODES:
         raise ValueError(f"suction_mode must be one of {SUCTION_MODES}, got {suction_mode!r}")
     if tool != "suction" and suction_mode != "momentary":
         raise ValueError(f"suction_mode={suction_mode!r} applies to the suction tool only (tool={tool!r})")
-    _non_negative_int("horizon", horizon, 1)
-    _non_negative_int("scene_pool", scene_pool)
-    _non_negative_int("pool_seed", pool_seed)
+    _int_at_least("horizon", horizon, 1)
+    _int_at_least("scene_pool", scene_pool)
+    _int_at_least("pool_seed", pool_seed)
     if scenes is not None and not isinstance(scenes, (str, bytes)) and hasattr(scenes, "__len__") and len(scenes) == 0:
         raise ValueError("scenes must be a non-empty sequence")
     if scene_pool and scenes is not None:
