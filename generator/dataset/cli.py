@@ -42,7 +42,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     gen.add_argument("--lighting", action="store_true", help="randomise lighting")
     gen.add_argument("--soil", action="store_true", help="randomise soil tint and texture scale")
     gen.add_argument("--camera-jitter", action="store_true", help="jitter camera height and tilt")
-    gen.add_argument("--realism", action="store_true", help="all of the five realism options")
+    gen.add_argument("--correlated-noise", action="store_true",
+                     help="stereo noise in disparity, correlated over the matching window (replaces --depth-noise)")
+    gen.add_argument("--disparity-quantisation", action="store_true", help="depth on a 1/32 px disparity grid")
+    gen.add_argument("--flying-pixels", action="store_true", help="mixed near/far depths at depth edges")
+    gen.add_argument("--stereo-shadows", action="store_true",
+                     help="invalid depth where the right imager cannot see (left of near objects, left image edge)")
+    gen.add_argument("--rgb-noise", action="store_true", help="Poisson-Gaussian RGB sensor noise")
+    gen.add_argument("--rgb-blur", action="store_true", help="random Gaussian blur of the RGB image")
+    gen.add_argument("--exposure", action="store_true", help="random exposure gain of the RGB image")
+    gen.add_argument("--realism", action="store_true", help="all realism options")
     gen.add_argument("--no-progress", action="store_true")
     gen.set_defaults(func=run_generate)
 
@@ -80,7 +89,10 @@ def run_generate(args: argparse.Namespace) -> int:
         a = args.realism
         options = DatasetOptions(split_ratios=args.split_ratios, shadows=args.shadows, realism=RealismOptions(
             depth_noise=a or args.depth_noise, edge_holes=a or args.edge_holes, lighting=a or args.lighting,
-            soil=a or args.soil, camera_jitter=a or args.camera_jitter))
+            soil=a or args.soil, camera_jitter=a or args.camera_jitter, correlated_noise=a or args.correlated_noise,
+            disparity_quantisation=a or args.disparity_quantisation, flying_pixels=a or args.flying_pixels,
+            stereo_shadows=a or args.stereo_shadows, rgb_noise=a or args.rgb_noise, rgb_blur=a or args.rgb_blur,
+            exposure=a or args.exposure))
         if args.workers < 1:
             raise ConfigError("--workers", "must be >= 1")
         manifest = generate_dataset(args.out, cfg, args.num_scenes, args.seed, options=options, workers=args.workers,

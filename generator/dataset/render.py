@@ -22,7 +22,7 @@ import mujoco  # noqa: E402
 
 from generator.camera import Intrinsics, camera_intrinsics, project, world_from_camera_cv
 from generator.dataset.options import DatasetOptions
-from generator.dataset.realism import apply_depth_realism, randomise_model
+from generator.dataset.realism import apply_depth_realism, apply_rgb_realism, randomise_model
 from generator.gl import open_renderer
 from generator.mjcf import scene_to_spec
 from generator.scene import Scene
@@ -134,8 +134,14 @@ class SceneRenderer:
 
         far = cam_cfg.zfar
         depth = np.where((object_id >= 0) & (depth < far * 0.999) & (depth > 0), depth, 0.0).astype(np.float32)
-        if options.realism.depth_noise or options.realism.edge_holes:
-            depth = apply_depth_realism(depth, intr.fy, cam_cfg.preset, options.realism, rng)
+        # Depth draws before RGB draws (docs in generator/dataset/realism.py); an effect that is
+        # off draws nothing, so older datasets reproduce.
+        if options.realism.depth_any:
+            depth, drawn = apply_depth_realism(depth, intr.fx, cam_cfg.preset, options.realism, rng)
+            realism.update(drawn)
+        if options.realism.rgb_any:
+            rgb, drawn = apply_rgb_realism(rgb, options.realism, rng)
+            realism.update(drawn)
 
         amodal_caps = self._render_amodal(r, model, data, scene, cap_ids, pose, intr) if amodal else {}
         return Frame(rgb, depth, labels_mushroom, labels_cap, amodal_caps, intr, pose,
