@@ -23,10 +23,10 @@ import torch
 
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
-from perception.estimator import PoseEstimator
-from perception.eval_pipeline import run_scene, scene_indices
-from perception.maskrcnn import DetectorConfig, MaskRCNNDetector, build_maskrcnn
+from perception.detection.maskrcnn import DetectorConfig, MaskRCNNDetector, build_maskrcnn
+from perception.evaluation.eval_pipeline import run_scene, scene_indices
 from perception.pipeline import PosePipeline
+from perception.pose.estimator import PoseEstimator
 
 
 def median_ms(fn, repeats: int) -> float:

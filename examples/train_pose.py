@@ -17,11 +17,11 @@ import argparse
 import numpy as np
 import torch
 
-from perception.data import PointCloudPoseDataset
-from perception.estimator import PoseEstimator
-from perception.pose_net import PoseNetConfig
-from perception.synthetic_views import default_models, generate_samples
-from perception.train import TrainConfig, evaluate, train
+from perception.pose.data import PointCloudPoseDataset
+from perception.pose.estimator import PoseEstimator
+from perception.pose.pose_net import PoseNetConfig
+from perception.pose.synthetic_views import default_models, generate_samples
+from perception.pose.train import TrainConfig, evaluate, train
 
 
 def main() -> None:

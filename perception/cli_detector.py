@@ -65,20 +65,23 @@ def _set_threads(threads: int | None) -> None:
 
 
 def _pipeline(args: argparse.Namespace):
-    from perception.estimator import PoseEstimator
-    from perception.maskrcnn import MaskRCNNDetector
+    """The pipeline ``--detector``/``--weights`` name, after printing the ``masks:`` line."""
+    from perception.detection.load import describe_detector, load_detector
     from perception.pipeline import PosePipeline
+    from perception.pose.estimator import PoseEstimator
 
     estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
     oracle = args.detector == "oracle"
-    detector = None if oracle else MaskRCNNDetector.from_checkpoint(args.detector, score_threshold=args.score_threshold)
+    overrides = {} if args.score_threshold is None else {"score_threshold": args.score_threshold}
+    detector = load_detector(args.detector, **overrides)
     soil = None if oracle or args.soil_margin_mm <= 0 else args.soil_margin_mm / 1000.0
+    print(f"masks: {describe_detector(args.detector)}")
     return PosePipeline(estimator, detector, soil_margin_m=soil), oracle
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from perception.maskrcnn import DetectorConfig
-    from perception.train_detector import DetectorTrainConfig, train_detector
+    from perception.detection.maskrcnn import DetectorConfig
+    from perception.detection.train_detector import DetectorTrainConfig, train_detector
 
     _set_threads(args.threads)
     config = DetectorConfig(arch=args.arch, category=args.category, min_size=args.min_size, max_size=args.max_size)
@@ -89,9 +92,20 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train_segmenter(args: argparse.Namespace) -> int:
+    from perception.detection.segmenter_config import SegmenterTrainConfig
+    from perception.detection.train_segmenter import train_segmenter
+
+    _set_threads(args.threads)
+    train = SegmenterTrainConfig(**{name: getattr(args, name) for name in _TRAIN_SEGMENTER_FIELDS})
+    log = train_segmenter(args.data, args.out, train=train, resume=not args.restart)
+    print(json.dumps(log[-1] if log else {}, indent=2))
+    return 0
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
-    from perception.detector_eval import evaluate_detector
-    from perception.maskrcnn import MaskRCNNDetector
+    from perception.detection.detector_eval import evaluate_detector
+    from perception.detection.maskrcnn import MaskRCNNDetector
 
     _set_threads(args.threads)
     detector = MaskRCNNDetector.from_checkpoint(args.checkpoint, args.device, score_threshold=args.score_threshold)
@@ -104,7 +118,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_eval_pipeline(args: argparse.Namespace) -> int:
-    from perception.eval_pipeline import evaluate_pipeline
+    from perception.evaluation.eval_pipeline import evaluate_pipeline
 
     _set_threads(args.threads)
     pipeline, oracle = _pipeline(args)
@@ -118,8 +132,8 @@ def cmd_eval_pipeline(args: argparse.Namespace) -> int:
 def cmd_show(args: argparse.Namespace) -> int:
     from generator.dataset.readers import read_scene_files
     from generator.dataset.writer import scene_dirname
-    from perception.eval_pipeline import run_scene
-    from perception.show_estimates import estimates_figure
+    from perception.evaluation.eval_pipeline import run_scene
+    from perception.plots.show_estimates import estimates_figure
 
     _set_threads(args.threads)
     pipeline, oracle = _pipeline(args)
@@ -136,14 +150,51 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _pipeline_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--detector", default="oracle", help="'oracle' (segmentation render) or a train-detector checkpoint")
+    p.add_argument("--detector", default="shipped",
+                   help="stage 1: 'shipped' (the shipped RGB-D segmenter, default), 'oracle' (MuJoCo's segmentation "
+                        "masks) or a train-segmenter / train-detector checkpoint")
     p.add_argument("--weights", help="pose-network checkpoint (default: the shipped weights)")
-    p.add_argument("--score-threshold", type=float, default=0.5, help="detections below this score are dropped")
+    p.add_argument("--score-threshold", type=float, default=None,
+                   help="detections below this score are dropped (default: the detector's own)")
     p.add_argument("--soil-margin-mm", type=float, default=6.0,
                    help="with a learned detector, drop mask pixels within this distance of the local soil depth (0: off)")
 
 
+#: ``SegmenterTrainConfig`` fields that ``train-segmenter`` exposes, with their help; each flag's
+#: default is the dataclass's.
+_TRAIN_SEGMENTER_FIELDS = {
+    "epochs": "passes over the training scenes, one random crop each",
+    "batch_size": "crops per step",
+    "crop": "square crop side in half-resolution pixels",
+    "lr": "AdamW peak learning rate (linear warm-up, cosine decay)",
+    "seed": "seed of crops, flips and initial weights",
+    "time_limit_min": "stop after the epoch that passes this many minutes (resumable)",
+    "val_every": "validate (mask F1 and AP on each folder's val split) every N epochs",
+}
+
+
+def _add_dataclass_flags(p: argparse.ArgumentParser, cls: type, helps: dict[str, str]) -> None:
+    """One ``--flag`` per field in ``helps``, its type and default taken from dataclass ``cls``."""
+    import dataclasses
+
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    for name, text in helps.items():
+        default = fields[name].default
+        kind = float if name in ("lr", "time_limit_min") else int
+        p.add_argument(f"--{name.replace('_', '-')}", type=kind, default=default, help=f"{text} (default {default})")
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from perception.detection.segmenter_config import SegmenterTrainConfig
+
+    p = subparsers.add_parser("train-segmenter", help="train the RGB-D segmenter (stage 1) on generated datasets (resumable)")
+    p.add_argument("--data", required=True, nargs="+", help="dataset folders written by `sms3d generate` (train and val splits)")
+    p.add_argument("--threads", type=_positive_int, default=None, help="torch CPU threads (>= 1; default: torch's own)")
+    p.add_argument("--out", required=True, help="run folder: last.pt, best.pt, log.csv")
+    _add_dataclass_flags(p, SegmenterTrainConfig, _TRAIN_SEGMENTER_FIELDS)
+    p.add_argument("--restart", action="store_true", help="ignore an existing last.pt instead of resuming")
+    p.set_defaults(func=_clear_errors(cmd_train_segmenter))
+
     p = subparsers.add_parser("train-detector", help="train Mask R-CNN on a dataset's COCO files (resumable)")
     _common(p)
     p.add_argument("--out", required=True, help="run folder: last.pt, best.pt, log.csv")

@@ -5,9 +5,9 @@
 ``python -m perception.cli_pose {train-pose,eval-pose} ...``.
 
 Data: ``--scenes DIR`` reads per-instance clouds from a rendered scene dataset
-(``generator.dataset``; splits train/val, or ``--split`` for evaluation); ``--data`` reads per-instance samples from a ``.npz`` in the :mod:`perception.data`
+(``generator.dataset``; splits train/val, or ``--split`` for evaluation); ``--data`` reads per-instance samples from a ``.npz`` in the :mod:`perception.pose.data`
 format (``--val-data`` likewise); without it, single-mushroom views are rendered on the fly by
-:mod:`perception.synthetic_views` from the generator's model library with the given seeds.
+:mod:`perception.pose.synthetic_views` from the generator's model library with the given seeds.
 ``--add-synthetic N`` mixes N such views into ``--scenes`` training data; ``--init CHECKPOINT``
 fine-tunes from a checkpoint's weights (same network config) instead of a fresh network.
 """
@@ -21,7 +21,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from perception.choices import HEAD_DIMS
+from perception.choices import HEAD_NAMES
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 
 # torch, the data pipeline and the networks are imported inside the commands: ``register`` runs
@@ -41,8 +41,12 @@ def _samples(
     data: str | None, n: int, seed: int, model_ids: Sequence[int] | None, cache: Path | None, label: str,
     procedural: int = 0,
 ):  # fmt: skip
-    from perception.data import load_samples, save_samples
-    from perception.synthetic_views import default_models, generate_samples, procedural_mesh_models
+    from perception.pose.data import load_samples, save_samples
+    from perception.pose.synthetic_views import (
+        default_models,
+        generate_samples,
+        procedural_mesh_models,
+    )
 
     if data:
         return load_samples(data)
@@ -64,9 +68,9 @@ def _samples(
 def cmd_train(args: argparse.Namespace) -> int:
     import torch
 
-    from perception.data import PointCloudPoseDataset, samples_from_scenes
-    from perception.pose_net import PoseNetConfig
-    from perception.train import TrainConfig, train
+    from perception.pose.data import PointCloudPoseDataset, samples_from_scenes
+    from perception.pose.pose_net import PoseNetConfig
+    from perception.pose.train import TrainConfig, train
 
     torch.set_num_threads(args.threads)
     try:
@@ -114,10 +118,10 @@ def cmd_train(args: argparse.Namespace) -> int:
 def cmd_eval(args: argparse.Namespace) -> int:
     import torch
 
-    from perception.data import PointCloudPoseDataset, samples_from_scenes
-    from perception.estimator import default_weights_path
-    from perception.pose_net import load_checkpoint
-    from perception.train import evaluate
+    from perception.pose.data import PointCloudPoseDataset, samples_from_scenes
+    from perception.pose.estimator import default_weights_path
+    from perception.pose.pose_net import load_checkpoint
+    from perception.pose.train import evaluate
 
     torch.set_num_threads(args.threads)
 
@@ -139,7 +143,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("train-pose", help="train the pose network on rendered single-mushroom views")
     p.add_argument("--out", required=True, help="output folder (checkpoints, log.csv)")
     p.add_argument("--backbone", default="point_transformer", choices=("point_transformer", "pointnet", "pointnet2"))
-    p.add_argument("--head", default="6d", choices=sorted(HEAD_DIMS))
+    p.add_argument("--head", default="6d", choices=HEAD_NAMES)
     p.add_argument("--rgb", action="store_true", help="feed RGB with the points")
     p.add_argument("--num-points", type=int, default=1024)
     p.add_argument("--epochs", type=int, default=50)
@@ -155,7 +159,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="render training views of N fresh procedural shapes per species (seeded by --seed) instead of "
              "the library's --model-ids; validation views stay on --model-ids",
     )  # fmt: skip
-    p.add_argument("--data", help="training samples .npz (perception.data format) instead of rendering")
+    p.add_argument("--data", help="training samples .npz (perception.pose.data format) instead of rendering")
     p.add_argument("--val-data", help="validation samples .npz")
     p.add_argument("--scenes", help="rendered scene dataset folder (generator.dataset): its train/val splits")
     p.add_argument("--cap-only", action="store_true", help="with --scenes: cap points only")

@@ -9,10 +9,10 @@ import cv2
 import numpy as np
 
 from generator.camera import Intrinsics
-from perception.detector import Detection, Detector
+from perception.detection.detector import Detection, Detector
 from perception.errors import NoEstimate, PipelineInputError
-from perception.estimator import PoseEstimator
 from perception.pointcloud import check_cloud, check_metres, depth_to_points, pinhole_intrinsics
+from perception.pose.estimator import PoseEstimator
 
 #: Cap-top band: points within this distance (m) below the cloud's top along the stem axis.
 CAP_TOP_BAND_M = 1e-3
@@ -99,6 +99,11 @@ def above_soil(mask: np.ndarray, depth: np.ndarray, margin_m: float, ring_px: in
 class PosePipeline:
     """Detector + pose network.
 
+    ``detector`` is a ``Detector``, or a name for ``perception.detection.load.load_detector``:
+    ``"shipped"`` (the default: the RGB-D segmenter shipped with the package, loaded at first
+    use), ``"oracle"`` / ``None`` (no detector: masks are passed to each call, e.g. MuJoCo's
+    segmentation), or a checkpoint path.
+
     ``soil_margin_m`` drops mask pixels within that distance of the local soil depth (see
     ``above_soil``; ``None``, the default, keeps masks whole). It is for learned masks: with the
     CPU-trained Mask R-CNN's it cut the mean stem-axis error on held-out scenes from 34° to 14°
@@ -107,12 +112,22 @@ class PosePipeline:
     raised its error with exact masks from 9.2° to 12.5°).
     """
 
-    def __init__(self, estimator: PoseEstimator, detector: Detector | None = None, erode_px: int = 0,
+    def __init__(self, estimator: PoseEstimator, detector: Detector | str | None = "shipped", erode_px: int = 0,
                  soil_margin_m: float | None = None) -> None:
         self.estimator = estimator
-        self.detector = detector
+        self.detector_name = detector if isinstance(detector, str) or detector is None else type(detector).__name__
+        self._detector = detector
         self.erode_px = erode_px
         self.soil_margin_m = soil_margin_m
+
+    @property
+    def detector(self) -> Detector | None:
+        """The stage-1 detector (``None``: masks must be passed in); a name is loaded here, once."""
+        if isinstance(self._detector, str):
+            from perception.detection.load import load_detector
+
+            self._detector = load_detector(self._detector)
+        return self._detector
 
     def __call__(self, rgb: np.ndarray, depth: np.ndarray, intrinsics: Intrinsics | np.ndarray,
                  world_from_camera: np.ndarray, detections: list[Detection] | None = None) -> list[MushroomEstimate]:
@@ -124,7 +139,7 @@ class PosePipeline:
         if detections is None:
             if self.detector is None:
                 raise ValueError("no detector: pass detections, or build the pipeline with a detector")
-            detections = self.detector.detect(rgb)
+            detections = self.detector.detect(rgb, depth)
         world_from_camera = np.asarray(world_from_camera, dtype=float)
         kernel = np.ones((2 * self.erode_px + 1,) * 2, np.uint8) if self.erode_px > 0 else None
         clouds, colours, kept = [], [], []

@@ -55,7 +55,7 @@ class SweepConfig:
     tools: tuple[str, ...] = ("suction",)
     variants: tuple[str, ...] = ("default",)
     perception_episodes: int = 0  # episodes with the perception pose source (default physics)
-    perception_detector: str | None = None  # a train-detector checkpoint; None: segmentation masks
+    perception_detector: str = "shipped"  # stage 1 of the perception episodes: "shipped", "oracle" or a path
     chunk: int = 10  # episodes per task (one part file)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     picker: str = "scripted"  # "scripted", "policy[:PATH]" or "residual:PATH" (sms3d_env.pickers)
@@ -144,18 +144,6 @@ def target_features(scene: Any, target: int) -> dict[str, float]:
     return {"tilt_deg": tilt, "cap_diameter": inst.cap_diameter, "nn_distance": nearest}
 
 
-def _perception_pipeline(detector_checkpoint: str | None) -> Any:
-    """The shipped pose network behind oracle masks, or behind a trained Mask R-CNN."""
-    if detector_checkpoint is None:
-        return None  # PerceptionPose's default
-    from perception.estimator import PoseEstimator
-    from perception.maskrcnn import MaskRCNNDetector
-    from perception.pipeline import PosePipeline
-
-    return PosePipeline(PoseEstimator.from_pretrained(), MaskRCNNDetector.from_checkpoint(detector_checkpoint),
-                        soil_margin_m=0.006)  # learned masks spill onto the soil (see PosePipeline)
-
-
 def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     """Run one task's episodes in this process and return one row per episode."""
     from generator import SceneConfig
@@ -167,7 +155,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     if task.source == "perception":
         from sms3d_env.perception_source import PerceptionPose
 
-        source: Any = PerceptionPose(_perception_pipeline(config.perception_detector))
+        source: Any = PerceptionPose(detector=config.perception_detector)
     else:
         source = NoisyPose(task.error_deg, position_error=task.position_error_mm / 1000,
                            along_axis=config.position_along_axis)
@@ -214,7 +202,7 @@ def _pose_weights_digest() -> str:
     """SHA-256 (16 hex digits) of the shipped pose weights the perception episodes use."""
     import hashlib
 
-    from perception.estimator import default_weights_path
+    from perception.pose.estimator import default_weights_path
 
     return hashlib.sha256(default_weights_path().read_bytes()).hexdigest()[:16]
 
@@ -441,8 +429,9 @@ def register(subparsers: Any) -> None:
                    help="physics settings to compare (sensitivity to unsourced assumptions)")
     p.add_argument("--perception-episodes", type=int, default=0,
                    help="also run this many episodes with the perception pose source (shipped network)")
-    p.add_argument("--perception-detector", help="train-detector checkpoint whose masks the perception episodes use "
-                                                  "(default: MuJoCo's segmentation masks)")
+    p.add_argument("--perception-detector", default=SweepConfig.perception_detector,
+                   help="stage 1 of the perception episodes: 'shipped' (the shipped RGB-D segmenter, default), "
+                        "'oracle' (MuJoCo's segmentation masks) or a train-segmenter/train-detector checkpoint")
     p.add_argument("--picker", default="scripted",
                    help="scripted (default), policy (the shipped policy), policy:PATH/model.zip or "
                         "residual:PATH/model.zip; every picker sees the same seeded episodes")

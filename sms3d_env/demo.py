@@ -1,7 +1,9 @@
 """``sms3d demo``: the whole project in one minute on embedded defaults.
 
-Generates a seeded bed and renders it, then lets the scripted pose-aware picker pick with exact
-poses and with a 30-degree orientation error, saving an image strip of each pick.
+Generates a seeded bed and renders it, runs the shipped two-stage perception on its overhead
+RGB-D image (a picture of the masks and estimated stem axes), then lets the scripted pose-aware
+picker pick with exact poses, with a 30-degree orientation error and with the poses perception
+estimated from pixels, saving an image strip of each pick.
 """
 
 from __future__ import annotations
@@ -31,8 +33,38 @@ def picker_strip(env: Any, policy: Any, seed: int, frames: int = 6) -> tuple[np.
     return np.concatenate([images[i] for i in idx], axis=1), info
 
 
+#: What the demo picks with: a label, the env's pose-source arguments, and the strip's file name.
+PICKS = (
+    ("exact poses", {"pose_source": "noisy", "pose_error_deg": 0.0}, "pick_error_0deg.png"),
+    ("30° pose error", {"pose_source": "noisy", "pose_error_deg": 30.0}, "pick_error_30deg.png"),
+    ("poses from pixels", {"pose_source": "perception"}, "pick_perception.png"),
+)
+
+
+def perception_picture(config: Any, seed: int, path: Path) -> int:
+    """Render the bed from the overhead camera, run the shipped two-stage pipeline (RGB-D
+    segmenter, then pose network) and save the masks and estimated stem axes; returns the number
+    of mushrooms estimated."""
+    from generator import generate_scene
+    from generator.dataset.render import SceneRenderer
+    from generator.files import save_rgb_png
+    from perception.pipeline import PosePipeline
+    from perception.plots.masks_and_axes import draw_masks_and_axes
+    from perception.pose.estimator import PoseEstimator
+
+    scene = generate_scene(config, seed)
+    cam = scene.config.camera
+    with SceneRenderer(cam.height, cam.width) as renderer:
+        frame = renderer.render(scene, amodal=False)
+    estimates = PosePipeline(PoseEstimator.from_pretrained())(frame.rgb, frame.depth, frame.intrinsics,
+                                                              frame.world_from_camera)
+    save_rgb_png(path, draw_masks_and_axes(frame.rgb, estimates, frame.intrinsics.matrix))
+    return len(estimates)
+
+
 def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -> dict[str, float]:
-    """Write ``scene.png`` and picker strips into ``out``; return success rates per pose error."""
+    """Write ``scene.png``, ``perception.png`` (stage 1 masks and stage 2 axes) and a picker strip
+    per entry of ``PICKS`` into ``out``; return the success rate of each entry, by label."""
     import gymnasium as gym
     from tqdm.auto import tqdm
 
@@ -47,26 +79,29 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
     config = SceneConfig().replace(placement__num_mushrooms=25)
     save_preview(generate_scene(config, seed), out / "scene.png")
     print(f"bed of 25 mushrooms rendered: {out / 'scene.png'}")
+    found = perception_picture(config, seed, out / "perception.png")
+    print(f"from pixels (shipped segmenter + pose network): {found} mushrooms estimated: {out / 'perception.png'}")
     rates = {}
-    for error in (0.0, 30.0):
-        env = gym.make("SMS3DPick-v0", scene_config=config, pose_source="noisy", pose_error_deg=error,
-                       render_mode="rgb_array", camera="side", render_size=(240, 320))
+    for label, source, name in PICKS:
+        env = gym.make("SMS3DPick-v0", scene_config=config, render_mode="rgb_array", camera="side",
+                       render_size=(240, 320), **source)
         picker = ScriptedPicker.for_env(env)
         strip, info = picker_strip(env, picker, seed)
-        save_rgb_png(out / f"pick_error_{error:g}deg.png", strip)
-        results = [run_episode(env, picker, seed + k) for k in tqdm(range(episodes), desc=f"picking, pose error {error:g}°")]
+        save_rgb_png(out / name, strip)
+        results = [run_episode(env, picker, seed + k) for k in tqdm(range(episodes), desc=f"picking, {label}")]
         env.close()
         reachable = [r for r in results if r["reachable"]]
-        rates[error] = float(np.mean([r["success"] for r in reachable])) if reachable else float("nan")
+        rates[label] = float(np.mean([r["success"] for r in reachable])) if reachable else float("nan")
         causes = sorted({r["failure_cause"] for r in reachable if not r["success"]})
-        print(f"pose error {error:4.0f}°: {sum(r['success'] for r in reachable)}/{len(reachable)} reachable targets picked"
-              f"{'; failures: ' + ', '.join(causes) if causes else ''}; strip: {out / f'pick_error_{error:g}deg.png'}")
+        print(f"{label:>18}: {sum(r['success'] for r in reachable)}/{len(reachable)} reachable targets picked"
+              f"{'; failures: ' + ', '.join(causes) if causes else ''}; strip: {out / name}")
     return rates
 
 
 def register(subparsers: Any) -> None:
     """Add ``sms3d demo``."""
-    p = subparsers.add_parser("demo", help="generate and render a bed, then pick with exact and 30°-wrong poses")
+    p = subparsers.add_parser("demo", help="generate and render a bed, estimate poses from its pixels, then pick with exact, "
+                                                  "30°-wrong and estimated poses")
     p.add_argument("--out", default="sms3d_demo", help="folder for the pictures (default sms3d_demo)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--episodes", type=int, default=5, help="episodes per pose error")

@@ -2,10 +2,10 @@
 
 At reset the scene is rendered from its overhead camera (RGB, metric depth, instance labels),
 the detector's masks are cut out of the depth, and the pose network estimates each mushroom.
-Without a detector in the pipeline the masks come from MuJoCo's segmentation render (oracle), so
-the pose network's error is what reaches the picker. With a learned detector (e.g. a
-``MaskRCNNDetector``) the target's estimate is the one whose mask overlaps the target's visible
-mask best, with IoU >= 0.5; a missed target is a fallback like an unestimated one.
+By default the masks are the shipped RGB-D segmenter's; the target's estimate is the one whose
+mask overlaps the target's visible mask best, with IoU >= 0.5 (a missed target is a fallback
+like an unestimated one). With ``detector="oracle"`` the masks come from MuJoCo's segmentation
+render, so that only the pose network's error reaches the picker (an ablation).
 
 If the target gets no estimate (hidden, or fewer points than the network needs) the source
 falls back to an upright stem through the target's cap top — a flagged outcome, counted in
@@ -26,7 +26,7 @@ MIN_TARGET_IOU = 0.5
 def _target_estimate(estimates: list[Any], target_mask: np.ndarray) -> list[Any]:
     """The estimate whose mask overlaps ``target_mask`` best (IoU >= ``MIN_TARGET_IOU``), or none."""
     best, best_iou = None, MIN_TARGET_IOU
-    from perception.detector import mask_iou
+    from perception.detection.detector import mask_iou
 
     for est in estimates:
         iou = mask_iou(est.detection.mask, target_mask)
@@ -39,16 +39,20 @@ class PerceptionPose:
     """Callable pose source ``(scene, instance_id, rng) -> PoseEstimate`` using ``PosePipeline``.
 
     Args:
-        pipeline: a ``perception.pipeline.PosePipeline``; default: the shipped pose network with
-            oracle masks. A pipeline built with a detector uses that detector's masks.
+        pipeline: a ``perception.pipeline.PosePipeline``; default: the shipped pose network behind
+            ``detector``. A pipeline without a detector (``detector=None``) gets oracle masks.
+        detector: stage 1 when no ``pipeline`` is given: ``"shipped"`` (default), ``"oracle"`` or
+            a checkpoint path (``perception.detection.load.load_detector``).
         part: which oracle masks feed the network, ``"mushroom"`` (whole visible mushroom, what
             the shipped network was trained on) or ``"cap"``.
     """
 
-    def __init__(self, pipeline: Any = None, part: Literal["cap", "mushroom"] = "mushroom") -> None:
+    def __init__(self, pipeline: Any = None, part: Literal["cap", "mushroom"] = "mushroom",
+                 detector: str = "shipped") -> None:
         if part not in ("cap", "mushroom"):
             raise ValueError(f"part must be 'cap' or 'mushroom', got {part!r}")
         self.pipeline = pipeline
+        self.detector = detector
         self.part = part
         self.fallbacks = 0
         self.last_axis_error_deg: float | None = None
@@ -57,15 +61,15 @@ class PerceptionPose:
 
     def _pipeline(self) -> Any:
         if self.pipeline is None:
-            from perception.estimator import PoseEstimator
             from perception.pipeline import PosePipeline
+            from perception.pose.estimator import PoseEstimator
 
-            self.pipeline = PosePipeline(PoseEstimator.from_pretrained())
+            self.pipeline = PosePipeline(PoseEstimator.from_pretrained(), self.detector)
         return self.pipeline
 
     def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:
         from generator.dataset.render import SceneRenderer
-        from perception.detector import detections_from_labels
+        from perception.detection.detector import detections_from_labels
 
         cam = scene.config.camera
         if self._renderer is None or (self._renderer.height, self._renderer.width) != (cam.height, cam.width):

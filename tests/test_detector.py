@@ -14,23 +14,23 @@ from generator.cli import main as cli_main
 from generator.dataset import DatasetOptions, generate_dataset
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
-from perception.detector import detections_from_labels
-from perception.detector_data import CocoDetectionDataset
-from perception.detector_eval import evaluate_detector
-from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
-from perception.estimator import PoseEstimator
-from perception.eval_pipeline import evaluate_pipeline, run_scene
-from perception.maskrcnn import (
+from perception.detection.detector import detections_from_labels
+from perception.detection.detector_data import CocoDetectionDataset
+from perception.detection.detector_eval import evaluate_detector
+from perception.detection.maskrcnn import (
     DetectorConfig,
     MaskRCNNDetector,
     PretrainedWeightsMissing,
     build_maskrcnn,
     save_detector,
 )
+from perception.detection.train_detector import DetectorTrainConfig, train_detector
+from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
+from perception.evaluation.eval_pipeline import evaluate_pipeline, run_scene
 from perception.pipeline import PosePipeline
-from perception.pose_net import PoseNet, PoseNetConfig
-from perception.show_estimates import estimates_figure
-from perception.train_detector import DetectorTrainConfig, train_detector
+from perception.plots.show_estimates import estimates_figure
+from perception.pose.estimator import PoseEstimator
+from perception.pose.pose_net import PoseNet, PoseNetConfig
 
 try:
     import torchvision  # noqa: F401
@@ -59,7 +59,7 @@ class OracleDetector:
             s = read_scene_files(root / scene_dirname(i))
             self.labels[s.rgb.tobytes()] = s.labels_mushroom
 
-    def detect(self, rgb):
+    def detect(self, rgb, depth=None):
         return detections_from_labels(self.labels[np.asarray(rgb).tobytes()])
 
 

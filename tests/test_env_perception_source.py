@@ -10,9 +10,9 @@ import pytest
 
 from generator import SceneConfig, generate_scene
 from generator.dataset.render import SceneRenderer
-from perception.detector import detections_from_labels
-from perception.estimator import PoseEstimator
+from perception.detection.detector import detections_from_labels
 from perception.pipeline import PosePipeline
+from perception.pose.estimator import PoseEstimator
 from sms3d_env.perception_source import PerceptionPose
 
 
@@ -22,7 +22,7 @@ class LabelDetector:
     def __init__(self, labels, keep=True):
         self.detections = [dataclasses.replace(d, instance_id=None) for d in detections_from_labels(labels)] if keep else []
 
-    def detect(self, rgb):
+    def detect(self, rgb, depth=None):
         return self.detections
 
 
@@ -38,7 +38,7 @@ def scene_and_labels():
 def test_a_learned_detectors_mask_gives_the_oracle_estimate(scene_and_labels):
     scene, labels, target = scene_and_labels
     estimator = PoseEstimator.from_pretrained()
-    oracle = PerceptionPose(PosePipeline(estimator))
+    oracle = PerceptionPose(PosePipeline(estimator, None))
     learned = PerceptionPose(PosePipeline(estimator, LabelDetector(labels)))
     a = oracle(scene, target, np.random.default_rng(0))
     b = learned(scene, target, np.random.default_rng(0))

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from perception import eval_pose_heldout
-from perception.error_plots import binned_means, plot_errors
+from perception.evaluation import eval_pose_heldout
+from perception.plots.error_plots import binned_means, plot_errors
 
 
 def test_binned_means_are_equal_count_bin_means() -> None:
@@ -53,7 +53,7 @@ def test_estimate_errors_are_zero_for_the_truth() -> None:
         def estimate_batch(self, clouds):
             return [type("E", (), {"rotation": r})() for r in truth[: len(clouds)]]
 
-    from perception.data import PointCloudSample
+    from perception.pose.data import PointCloudSample
 
     truth = [np.eye(3), np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])]
     samples = [PointCloudSample(np.zeros((20, 3), np.float32), r.astype(np.float32)) for r in truth]

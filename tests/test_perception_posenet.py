@@ -5,10 +5,10 @@ from __future__ import annotations
 import pytest
 import torch
 
-from perception.backbones import BACKBONES
+from perception.choices import HEAD_NAMES
 from perception.errors import CheckpointMismatchError, PerceptionConfigError
-from perception.pose_net import (
-    HEAD_DIMS,
+from perception.pose.backbones import BACKBONES
+from perception.pose.pose_net import (
     PoseNet,
     PoseNetConfig,
     load_backbone,
@@ -28,7 +28,7 @@ def test_backbone_is_invariant_to_point_order(name: str) -> None:
     assert torch.allclose(a, b, atol=1e-4)
 
 
-@pytest.mark.parametrize("head", sorted(HEAD_DIMS))
+@pytest.mark.parametrize("head", HEAD_NAMES)
 @pytest.mark.parametrize("use_rgb", [False, True])
 def test_heads_output_rotations(head: str, use_rgb: bool) -> None:
     net = PoseNet(backbone="pointnet", head=head, use_rgb=use_rgb, num_points=64).eval()

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from perception import rotations as rot
+from perception.pose import rotations as rot
 
 
 @pytest.fixture
@@ -123,3 +123,19 @@ def test_bad_shapes_raise() -> None:
         rot.rotation_6d_to_matrix(torch.zeros(2, 5))
     with pytest.raises(ValueError, match="R1"):
         rot.geodesic_angle(torch.zeros(3), torch.eye(3))
+
+
+def test_head_registry_is_the_one_table_of_heads() -> None:
+    """The torch-free names ``sms3d --help`` offers are the registry's; each head's upright output
+    decodes to a mushroom whose stem points at the camera (camera -z), and encoding inverts
+    decoding."""
+    from perception.choices import HEAD_NAMES
+
+    assert HEAD_NAMES == tuple(rot.ROTATION_HEADS)
+    R = rot.random_rotations(16, torch.Generator().manual_seed(3), dtype=torch.float64)
+    for name, head in rot.ROTATION_HEADS.items():
+        upright = head.to_matrix(torch.tensor(head.upright, dtype=torch.float64))
+        assert torch.allclose(upright[:, 2], torch.tensor([0.0, 0.0, -1.0], dtype=torch.float64), atol=1e-9), name
+        raw = head.from_matrix(R)
+        assert raw.shape == (16, head.dim), name
+        assert torch.allclose(head.to_matrix(raw), R, atol=1e-6), name

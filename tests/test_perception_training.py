@@ -6,18 +6,23 @@ import numpy as np
 import pytest
 import torch
 
-from perception.data import (
+from perception.errors import PerceptionConfigError
+from perception.pose.data import (
     DatasetFormatError,
     PointCloudPoseDataset,
     PointCloudSample,
     load_samples,
     save_samples,
 )
-from perception.errors import PerceptionConfigError
-from perception.pose_net import PoseNet, PoseNetConfig
-from perception.rotations import CHANCE_AXIS_DEG, CHANCE_GEODESIC_DEG
-from perception.synthetic_views import ViewConfig, default_models, generate_samples, render_view
-from perception.train import TrainConfig, evaluate, train
+from perception.pose.pose_net import PoseNet, PoseNetConfig
+from perception.pose.rotations import CHANCE_AXIS_DEG, CHANCE_GEODESIC_DEG
+from perception.pose.synthetic_views import (
+    ViewConfig,
+    default_models,
+    generate_samples,
+    render_view,
+)
+from perception.pose.train import TrainConfig, evaluate, train
 
 FAST_VIEWS = ViewConfig(tilt_std_deg=45.0, surface_samples=8000)
 
@@ -123,7 +128,7 @@ def test_resume_continues_from_last_checkpoint(tmp_path, models) -> None:
 
 def test_init_fine_tunes_from_a_checkpoint(tmp_path, models) -> None:
     from perception.errors import CheckpointMismatchError
-    from perception.pose_net import load_checkpoint
+    from perception.pose.pose_net import load_checkpoint
 
     s = generate_samples(48, 4, models, FAST_VIEWS)
     net = PoseNetConfig(backbone="pointnet", num_points=64)
@@ -161,7 +166,7 @@ def test_cli_train_pose_init(tmp_path, models) -> None:
 
 
 def test_best_checkpoint_selected_by_axis_error(tmp_path, models) -> None:
-    from perception.pose_net import read_checkpoint
+    from perception.pose.pose_net import read_checkpoint
 
     s = generate_samples(48, 5, models, FAST_VIEWS)
     net = PoseNetConfig(backbone="pointnet", num_points=64)
@@ -176,7 +181,7 @@ def test_best_checkpoint_selected_by_axis_error(tmp_path, models) -> None:
 
 
 def test_ablation_writes_its_table_and_resumes(models, tmp_path, monkeypatch) -> None:
-    from perception import ablation
+    from perception.evaluation import ablation
 
     samples = generate_samples(24, seed=8, models=models, config=FAST_VIEWS)
     variants = [ablation.Variant("backbone", PoseNetConfig(backbone="pointnet", num_points=64)),

@@ -34,7 +34,10 @@ def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
 
 
 class Detector(Protocol):
-    def detect(self, rgb: np.ndarray) -> list[Detection]: ...
+    """What stage 1 is: one RGB-D image (``rgb (H, W, 3)`` uint8, ``depth (H, W)`` float metres,
+    0 = invalid) to instance detections. RGB-only detectors ignore ``depth``."""
+
+    def detect(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> list[Detection]: ...
 
 
 def detections_from_labels(labels: np.ndarray, min_pixels: int = 1) -> list[Detection]:

@@ -19,8 +19,9 @@ from torch.utils.data import Dataset
 
 from generator.dataset.coco import decode_mask
 from generator.dataset.errors import CorruptFileError
+from generator.dataset.writer import DEPTH_SCALE
+from perception.detection.maskrcnn import CATEGORIES
 from perception.errors import PerceptionConfigError
-from perception.maskrcnn import CATEGORIES
 
 T = TypeVar("T")
 
@@ -87,6 +88,14 @@ class CocoDetectionDataset(Dataset):
         if bgr is None:
             raise CorruptFileError(path, "unreadable image")
         return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+    def image_depth(self, i: int) -> np.ndarray:
+        """The image's depth in metres (0 = invalid), from the scene folder's ``depth.png``."""
+        path = self.root / self.images[i]["depth_file"]
+        depth = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if depth is None or depth.dtype != np.uint16:
+            raise CorruptFileError(path, "unreadable 16-bit depth image")
+        return depth.astype(np.float32) * DEPTH_SCALE
 
     def target(self, i: int) -> dict[str, torch.Tensor]:
         image = self.images[i]

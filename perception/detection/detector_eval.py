@@ -22,9 +22,9 @@ from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
-from perception.detector import Detection, Detector
-from perception.detector_data import CocoDetectionDataset, first_n
-from perception.maskrcnn import CATEGORIES
+from perception.detection.detector import Detection, Detector
+from perception.detection.detector_data import CocoDetectionDataset, first_n
+from perception.detection.maskrcnn import CATEGORIES
 
 
 @dataclass(frozen=True)
@@ -150,9 +150,9 @@ def evaluate_detector(detector: Detector, root: str | Path, split: str = "test",
         from tqdm import tqdm
         iterator = tqdm(iterator, desc=f"eval-detector {split}", unit="image")
     for i in iterator:
-        rgb = data.image_rgb(i)
+        rgb, depth = data.image_rgb(i), data.image_depth(i)
         start = time.perf_counter()
-        detections: list[Detection] = detector.detect(rgb)
+        detections: list[Detection] = detector.detect(rgb, depth)
         elapsed += time.perf_counter() - start
         for det in detections:
             x0, y0, x1, y1 = det.box

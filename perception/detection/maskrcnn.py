@@ -23,7 +23,7 @@ import torch
 from torch import nn
 
 from perception.choices import ARCHITECTURES, CATEGORIES
-from perception.detector import Detection
+from perception.detection.detector import Detection
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 
 CHECKPOINT_FORMAT = "sms3d-maskrcnn-1"
@@ -162,7 +162,7 @@ def detections_from_output(output: dict[str, torch.Tensor], config: DetectorConf
 
 
 class MaskRCNNDetector:
-    """A trained Mask R-CNN behind the ``Detector`` protocol (``detect(rgb) -> [Detection]``)."""
+    """A trained Mask R-CNN behind the ``Detector`` protocol (RGB only: ``depth`` is ignored)."""
 
     def __init__(self, model: nn.Module, config: DetectorConfig, device: str | torch.device = "cpu") -> None:
         self.config = config
@@ -170,7 +170,7 @@ class MaskRCNNDetector:
         self.model = model.to(self.device).eval()
 
     @torch.no_grad()
-    def detect(self, rgb: np.ndarray) -> list[Detection]:
+    def detect(self, rgb: np.ndarray, depth: np.ndarray | None = None) -> list[Detection]:
         return self.detect_batch([rgb])[0]
 
     @torch.no_grad()

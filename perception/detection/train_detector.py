@@ -20,16 +20,16 @@ from typing import Any
 import torch
 from torch.utils.data import DataLoader
 
-from perception.detector_data import CocoDetectionDataset, collate_detection
-from perception.detector_eval import evaluate_detector
-from perception.errors import PerceptionConfigError
-from perception.maskrcnn import (
+from perception.detection.detector_data import CocoDetectionDataset, collate_detection
+from perception.detection.detector_eval import evaluate_detector
+from perception.detection.maskrcnn import (
     DetectorConfig,
     MaskRCNNDetector,
     build_maskrcnn,
     read_detector_checkpoint,
     save_detector,
 )
+from perception.errors import PerceptionConfigError
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ stem-axis errors and batch-1 inference ms) and ``OUT/ablation.json``. For the fi
 (``OUT/error_vs_angles.png``, ``OUT/error_vs_size.png``). Rerunning with the same ``--out``
 and settings resumes: variants already in ``OUT/ablation.json`` are not trained again.
 
-Run: ``python -m perception.ablation --out runs/ablation`` (see ``--help`` for sizes).
+Run: ``python -m perception.evaluation.ablation --out runs/ablation`` (see ``--help`` for sizes).
 """
 
 from __future__ import annotations
@@ -23,11 +23,11 @@ from pathlib import Path
 import torch
 
 from generator.files import write_atomic
-from perception.data import PointCloudPoseDataset, PointCloudSample
-from perception.error_plots import plot_errors
-from perception.pose_net import PoseNet, PoseNetConfig
-from perception.synthetic_views import ViewConfig, default_models, generate_samples
-from perception.train import TrainConfig, evaluate, train
+from perception.plots.error_plots import plot_errors
+from perception.pose.data import PointCloudPoseDataset, PointCloudSample
+from perception.pose.pose_net import PoseNet, PoseNetConfig
+from perception.pose.synthetic_views import ViewConfig, default_models, generate_samples
+from perception.pose.train import TrainConfig, evaluate, train
 
 
 @dataclass(frozen=True)
@@ -128,7 +128,7 @@ def markdown_table(rows: Sequence[dict]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m perception.ablation", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(prog="python -m perception.evaluation.ablation", description=__doc__.splitlines()[0])
     p.add_argument("--out", required=True)
     p.add_argument("--num-train", type=int, default=4000)
     p.add_argument("--num-val", type=int, default=400)

@@ -21,8 +21,8 @@ import numpy as np
 from generator.dataset.readers import SceneSample, read_scene_files
 from generator.dataset.writer import scene_dirname
 from generator.geometry import tilt_angle
-from perception.detector import detections_from_labels, mask_iou
-from perception.detector_data import first_n, load_coco
+from perception.detection.detector import detections_from_labels, mask_iou
+from perception.detection.detector_data import first_n, load_coco
 from perception.pipeline import MushroomEstimate, PosePipeline
 
 SIZE_BINS_MM = (0.0, 35.0, 50.0, 65.0, 200.0)

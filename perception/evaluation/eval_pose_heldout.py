@@ -9,11 +9,11 @@ default target). Metrics: geodesic and stem-axis errors (degrees), and the axis 
 "always upright" prior (stem along -z of the OpenCV camera, i.e. towards a downward camera),
 and the mean/median axis error by visible points and by the stem's angle to the camera axis.
 
-    python -m perception.eval_pose_heldout --scenes runs/pose_scenes_heldout --split test \\
+    python -m perception.evaluation.eval_pose_heldout --scenes runs/pose_scenes_heldout --split test \\
         [--checkpoint PATH] [--json OUT.json] [--plots DIR]
 
 ``--plots DIR`` draws the stem-axis error of the training-model views against roll, pitch, yaw
-and cap size (:func:`perception.error_plots.plot_errors`, the paper's Figures 9–10).
+and cap size (:func:`perception.plots.error_plots.plot_errors`, the paper's Figures 9–10).
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from perception.data import PointCloudSample, samples_from_scenes
-from perception.error_plots import plot_errors
-from perception.estimator import PoseEstimator, default_weights_path
-from perception.metrics import errors_deg
-from perception.synthetic_views import default_models, generate_samples
+from perception.plots.error_plots import plot_errors
+from perception.pose.data import PointCloudSample, samples_from_scenes
+from perception.pose.estimator import PoseEstimator, default_weights_path
+from perception.pose.metrics import errors_deg
+from perception.pose.synthetic_views import default_models, generate_samples
 
 #: Bins of the breakdowns: visible points of the instance, stem angle to the camera's -z (°).
 POINT_BINS = (0, 200, 500, 1000, 2000, 4000, np.inf)
@@ -98,7 +98,7 @@ def tallest_per_scene(root: str | Path, samples: Sequence[PointCloudSample]) -> 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m perception.eval_pose_heldout")
+    p = argparse.ArgumentParser(prog="python -m perception.evaluation.eval_pose_heldout")
     p.add_argument("--checkpoint", help="default: the shipped weights")
     p.add_argument("--scenes", help="rendered scene dataset folder")
     p.add_argument("--split", default="test", help="scene split ('all' for every scene)")

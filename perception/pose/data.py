@@ -24,9 +24,9 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from perception.augment import AugmentConfig, augment_points
 from perception.errors import PerceptionConfigError
 from perception.pointcloud import MIN_POINTS, SamplingMethod, prepare_cloud, to_tensor
+from perception.pose.augment import AugmentConfig, augment_points
 
 FORMAT_VERSION = 1
 

@@ -54,10 +54,10 @@ from perception.pointcloud import (
     prepare_cloud,
     to_tensor,
 )
-from perception.pose_net import PoseNet, load_checkpoint
-from perception.rotations import rotation_6d_stem_to_matrix
+from perception.pose.pose_net import PoseNet, load_checkpoint
+from perception.pose.rotations import rotation_6d_stem_to_matrix
 
-WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 DEFAULT_WEIGHTS = "posenet_default.pt"
 
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from perception.rotations import axis_angle_error, geodesic_angle
+from perception.pose.rotations import axis_angle_error, geodesic_angle
 
 
 @dataclass(frozen=True)

@@ -20,26 +20,11 @@ from typing import Any, Literal
 import torch
 from torch import nn
 
-from perception import rotations as rot
-from perception.backbones import BACKBONES, build_backbone
-from perception.choices import HEAD_DIMS
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
+from perception.pose import rotations as rot
+from perception.pose.backbones import BACKBONES, build_backbone
 
-Head = Literal["6d", "6d_stem", "9d", "quat", "euler"]
-_DECODERS = {
-    "6d": rot.rotation_6d_to_matrix,
-    "6d_stem": rot.rotation_6d_stem_to_matrix,
-    "9d": rot.rotation_9d_to_matrix,
-    "quat": rot.quaternion_to_matrix,
-    "euler": rot.euler_to_matrix,
-}
-_UPRIGHT_BIAS = {
-    "6d": torch.tensor([1.0, 0, 0, 0, -1.0, 0]),
-    "6d_stem": torch.tensor([0.0, 0, -1.0, 1.0, 0, 0]),
-    "9d": torch.tensor([1.0, 0, 0, 0, -1.0, 0, 0, 0, -1.0]),
-    "quat": torch.tensor([0.0, 1.0, 0, 0]),  # pi about x
-    "euler": torch.tensor([torch.pi, 0.0, 0.0]),  # roll = pi
-}
+Head = Literal["6d", "6d_stem", "9d", "quat", "euler"]  # the keys of rotations.ROTATION_HEADS
 CHECKPOINT_FORMAT = "sms3d-posenet"
 CHECKPOINT_VERSION = 1
 
@@ -57,8 +42,8 @@ class PoseNetConfig:
     def __post_init__(self) -> None:
         if self.backbone not in BACKBONES:
             raise PerceptionConfigError("backbone", f"expected one of {sorted(BACKBONES)}, got {self.backbone!r}")
-        if self.head not in HEAD_DIMS:
-            raise PerceptionConfigError("head", f"expected one of {sorted(HEAD_DIMS)}, got {self.head!r}")
+        if self.head not in rot.ROTATION_HEADS:
+            raise PerceptionConfigError("head", f"expected one of {sorted(rot.ROTATION_HEADS)}, got {self.head!r}")
         if not isinstance(self.use_rgb, bool):
             raise PerceptionConfigError("use_rgb", f"must be a bool, got {self.use_rgb!r}")
         for name, lo in (("num_points", 16), ("hidden", 1)):
@@ -95,13 +80,13 @@ class PoseNet(nn.Module):
         self.backbone = build_backbone(config.backbone, config.in_channels, config.num_points)
         c = self.backbone.out_dim
         self.head = nn.Sequential(
-            nn.Linear(c, config.hidden), nn.ReLU(inplace=True), nn.Linear(config.hidden, HEAD_DIMS[config.head])
+            nn.Linear(c, config.hidden), nn.ReLU(inplace=True), nn.Linear(config.hidden, rot.ROTATION_HEADS[config.head].dim)
         )
-        self._decode = _DECODERS[config.head]
+        self._decode = rot.ROTATION_HEADS[config.head].to_matrix
         # Every head starts at the same prior, an upright mushroom seen from above:
         # R = diag(1, -1, -1) in the OpenCV camera frame (a fair start for the head ablation).
         with torch.no_grad():
-            self.head[-1].bias.copy_(_UPRIGHT_BIAS[config.head])
+            self.head[-1].bias.copy_(torch.tensor(rot.ROTATION_HEADS[config.head].upright))
 
     def raw(self, x: torch.Tensor) -> torch.Tensor:
         """The head's raw representation ``(B, head_dim)``."""

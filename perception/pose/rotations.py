@@ -2,7 +2,10 @@
 
 Rotation matrices are the canonical form (``(..., 3, 3)``, columns are the rotated frame's axes);
 every other representation converts to and from them here. All functions accept any leading batch
-shape and are differentiable unless stated otherwise.
+shape and are differentiable unless stated otherwise. The generic conversions (Gram–Schmidt, SVD
+projection, quaternions, Euler angles) are roma's (Brégier, 2021, "Deep regression on manifolds:
+a 3D rotation case study"); this module fixes the conventions, and keeps the stem-first 6D head and
+the losses, which roma does not have. ``ROTATION_HEADS`` is the one table of the heads.
 
 Conventions:
 - 6D: the first two columns of ``R`` stacked as ``(..., 6) = [c0, c1]``; decoded by Gram–Schmidt
@@ -18,8 +21,11 @@ Conventions:
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Literal
 
+import roma
 import torch
 
 RotationLoss = Literal["geodesic", "axis", "geodesic+axis"]
@@ -36,12 +42,10 @@ def _check_last(x: torch.Tensor, shape: tuple[int, ...], name: str) -> None:
 
 
 # --------------------------------------------------------------------------- 6D (Gram–Schmidt)
-def _gram_schmidt(a1: torch.Tensor, a2: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Orthonormal right-handed ``(b1, b2, b1 × b2)`` with ``b1 ∥ a1`` and ``b2`` in ``span(a1, a2)``."""
-    b1 = torch.nn.functional.normalize(a1, dim=-1, eps=_DEFAULT_EPS)
-    b2 = a2 - (b1 * a2).sum(-1, keepdim=True) * b1
-    b2 = torch.nn.functional.normalize(b2, dim=-1, eps=_DEFAULT_EPS)
-    return b1, b2, torch.linalg.cross(b1, b2, dim=-1)
+def _gram_schmidt(a1: torch.Tensor, a2: torch.Tensor) -> torch.Tensor:
+    """Columns ``(b1, b2, b1 × b2)``, orthonormal and right-handed, with ``b1 ∥ a1`` and ``b2`` in
+    ``span(a1, a2)`` (roma's ``special_gramschmidt``; norms clamped at ``_DEFAULT_EPS``)."""
+    return roma.special_gramschmidt(torch.stack((a1, a2), dim=-1), epsilon=_DEFAULT_EPS)
 
 
 def rotation_6d_to_matrix(d6: torch.Tensor) -> torch.Tensor:
@@ -51,7 +55,7 @@ def rotation_6d_to_matrix(d6: torch.Tensor) -> torch.Tensor:
     result are ``[b1, b2, b3]`` so that ``matrix_to_rotation_6d`` inverts it exactly.
     """
     _check_last(d6, (6,), "d6")
-    return torch.stack(_gram_schmidt(d6[..., :3], d6[..., 3:]), dim=-1)
+    return _gram_schmidt(d6[..., :3], d6[..., 3:])
 
 
 def matrix_to_rotation_6d(R: torch.Tensor) -> torch.Tensor:
@@ -70,8 +74,8 @@ def rotation_6d_stem_to_matrix(d6: torch.Tensor) -> torch.Tensor:
     the cross product of the two yaw-dependent columns.
     """
     _check_last(d6, (6,), "d6")
-    z, x, y = _gram_schmidt(d6[..., :3], d6[..., 3:])
-    return torch.stack((x, y, z), dim=-1)
+    zxy = _gram_schmidt(d6[..., :3], d6[..., 3:])
+    return zxy[..., [1, 2, 0]]
 
 
 def matrix_to_rotation_6d_stem(R: torch.Tensor) -> torch.Tensor:
@@ -82,14 +86,10 @@ def matrix_to_rotation_6d_stem(R: torch.Tensor) -> torch.Tensor:
 
 # --------------------------------------------------------------------------- 9D (SVD)
 def rotation_9d_to_matrix(d9: torch.Tensor) -> torch.Tensor:
-    """Project ``(..., 9)`` (row-major 3x3) onto SO(3) by SVD, forcing ``det = +1``."""
+    """Project ``(..., 9)`` (row-major 3x3) onto SO(3) by SVD, forcing ``det = +1`` (roma's
+    ``special_procrustes``)."""
     _check_last(d9, (9,), "d9")
-    M = d9.reshape(*d9.shape[:-1], 3, 3)
-    U, _, Vh = torch.linalg.svd(M)
-    det = torch.det(U @ Vh)
-    D = torch.ones_like(M[..., 0])
-    D = torch.cat((D[..., :2], det.unsqueeze(-1)), dim=-1)
-    return U @ torch.diag_embed(D) @ Vh
+    return roma.special_procrustes(d9.reshape(*d9.shape[:-1], 3, 3))
 
 
 def matrix_to_rotation_9d(R: torch.Tensor) -> torch.Tensor:
@@ -100,65 +100,24 @@ def matrix_to_rotation_9d(R: torch.Tensor) -> torch.Tensor:
 
 # --------------------------------------------------------------------------- quaternion
 def quaternion_to_matrix(q: torch.Tensor) -> torch.Tensor:
-    """``(w, x, y, z)`` (normalised here) to a rotation matrix."""
+    """``(w, x, y, z)`` (normalised here) to a rotation matrix (roma works scalar-last)."""
     _check_last(q, (4,), "q")
     q = torch.nn.functional.normalize(q, dim=-1, eps=_DEFAULT_EPS)
-    w, x, y, z = q.unbind(-1)
-    rows = (
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    )  # fmt: skip
-    return torch.stack(rows, dim=-1).reshape(*q.shape[:-1], 3, 3)
+    return roma.unitquat_to_rotmat(roma.quat_wxyz_to_xyzw(q))
 
 
 def matrix_to_quaternion(R: torch.Tensor) -> torch.Tensor:
-    """Rotation matrix to a unit quaternion ``(w, x, y, z)`` with ``w >= 0``.
-
-    Uses the numerically stable branch on the largest of ``(w², x², y², z²)``.
-    """
+    """Rotation matrix to a unit quaternion ``(w, x, y, z)`` with ``w >= 0``."""
     _check_last(R, (3, 3), "R")
-    m = R
-    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
-    # 4 * squared components, each from the diagonal.
-    sq = torch.stack(
-        (1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22), -1
-    )
-    k = sq.argmax(-1, keepdim=True)
-    r = torch.sqrt(torch.clamp(sq.gather(-1, k), min=1e-12)).squeeze(-1)  # 2*|component k|
-    a = m[..., 2, 1] - m[..., 1, 2]
-    b = m[..., 0, 2] - m[..., 2, 0]
-    c = m[..., 1, 0] - m[..., 0, 1]
-    d = m[..., 0, 1] + m[..., 1, 0]
-    e = m[..., 0, 2] + m[..., 2, 0]
-    f = m[..., 1, 2] + m[..., 2, 1]
-    cand = torch.stack(
-        (
-            torch.stack((r, a / r, b / r, c / r), -1),
-            torch.stack((a / r, r, d / r, e / r), -1),
-            torch.stack((b / r, d / r, r, f / r), -1),
-            torch.stack((c / r, e / r, f / r, r), -1),
-        ),
-        -2,
-    ) * 0.5
-    q = cand.gather(-2, k.unsqueeze(-1).expand(*k.shape[:-1], 1, 4)).squeeze(-2)
-    q = torch.nn.functional.normalize(q, dim=-1)
+    q = roma.quat_xyzw_to_wxyz(roma.rotmat_to_unitquat(R))
     return torch.where(q[..., :1] < 0, -q, q)
 
 
 # --------------------------------------------------------------------------- Euler xyz
 def euler_to_matrix(e: torch.Tensor) -> torch.Tensor:
-    """``(roll, pitch, yaw)`` to ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``."""
+    """``(roll, pitch, yaw)`` to ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)`` (roma's extrinsic "xyz")."""
     _check_last(e, (3,), "euler")
-    cr, sr = torch.cos(e[..., 0]), torch.sin(e[..., 0])
-    cp, sp = torch.cos(e[..., 1]), torch.sin(e[..., 1])
-    cy, sy = torch.cos(e[..., 2]), torch.sin(e[..., 2])
-    rows = (
-        cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr,
-        sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr,
-        -sp, cp * sr, cp * cr,
-    )  # fmt: skip
-    return torch.stack(rows, dim=-1).reshape(*e.shape[:-1], 3, 3)
+    return roma.euler_to_rotmat("xyz", e)
 
 
 def matrix_to_euler(R: torch.Tensor) -> torch.Tensor:
@@ -178,6 +137,30 @@ def matrix_to_euler(R: torch.Tensor) -> torch.Tensor:
         torch.atan2(-R[..., 0, 1], R[..., 1, 1]),
     )
     return torch.stack((roll, pitch, yaw), dim=-1)
+
+
+# --------------------------------------------------------------------------- the heads
+@dataclass(frozen=True)
+class RotationHead:
+    """One rotation head of the pose network: the size of its raw output, how that output
+    decodes to a rotation and a rotation encodes to it, and the raw output of an upright
+    mushroom seen from above (stem axis along the camera's -z), with which the head's bias starts."""
+
+    dim: int
+    to_matrix: Callable[[torch.Tensor], torch.Tensor]
+    from_matrix: Callable[[torch.Tensor], torch.Tensor]
+    upright: tuple[float, ...]
+
+
+#: Every head, by the name a ``PoseNetConfig`` stores (``perception.choices.HEAD_NAMES`` lists the
+#: same names without importing torch, for ``sms3d --help``).
+ROTATION_HEADS: dict[str, RotationHead] = {
+    "6d": RotationHead(6, rotation_6d_to_matrix, matrix_to_rotation_6d, (1.0, 0, 0, 0, -1.0, 0)),
+    "6d_stem": RotationHead(6, rotation_6d_stem_to_matrix, matrix_to_rotation_6d_stem, (0.0, 0, -1.0, 1.0, 0, 0)),
+    "9d": RotationHead(9, rotation_9d_to_matrix, matrix_to_rotation_9d, (1.0, 0, 0, 0, -1.0, 0, 0, 0, -1.0)),
+    "quat": RotationHead(4, quaternion_to_matrix, matrix_to_quaternion, (0.0, 1.0, 0, 0)),  # pi about x
+    "euler": RotationHead(3, euler_to_matrix, matrix_to_euler, (math.pi, 0.0, 0.0)),  # roll = pi
+}
 
 
 # --------------------------------------------------------------------------- errors and losses

@@ -21,9 +21,9 @@ import numpy as np
 import trimesh
 
 from generator.geometry import rotation_xyz
-from perception.data import PointCloudSample
 from perception.errors import PerceptionConfigError
 from perception.pointcloud import MIN_POINTS, Intrinsics, depth_to_points
+from perception.pose.data import PointCloudSample
 
 #: World-from-camera rotation for a camera looking straight down (OpenCV axes):
 #: camera x = world x, camera y = world −y, camera z = world −z.

@@ -1,4 +1,4 @@
-"""Training and evaluation loops for :class:`~perception.pose_net.PoseNet`.
+"""Training and evaluation loops for :class:`~perception.pose.pose_net.PoseNet`.
 
 Adam (lr 1e-4 by default, as in the SMS3D paper) with ReduceLROnPlateau on the validation
 loss, batch 32, label-preserving augmentation, validation every epoch, an atomic checkpoint
@@ -24,10 +24,10 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from perception.augment import AugmentConfig
 from perception.errors import PerceptionConfigError
-from perception.metrics import PoseMetrics, errors_deg, summarize
-from perception.pose_net import (
+from perception.pose.augment import AugmentConfig
+from perception.pose.metrics import PoseMetrics, errors_deg, summarize
+from perception.pose.pose_net import (
     PoseNet,
     PoseNetConfig,
     atomic_torch_save,
@@ -35,7 +35,7 @@ from perception.pose_net import (
     load_checkpoint,
     save_checkpoint,
 )
-from perception.rotations import ROTATION_LOSSES, rotation_loss
+from perception.pose.rotations import ROTATION_LOSSES, rotation_loss
 
 CSV_FIELDS = (
     "epoch", "lr", "train_loss", "val_loss", "val_mean_geodesic_deg", "val_median_geodesic_deg",
@@ -144,7 +144,7 @@ def train(
     With ``init``, training starts from the weights of that checkpoint (fine-tuning; its network
     config must equal ``net_config``, else :class:`CheckpointMismatchError`); a resumed run
     ignores it. With ``init_backbone``, only that checkpoint's backbone and hidden head layer are
-    loaded (:func:`~perception.pose_net.load_backbone`): the way to change the rotation head.
+    loaded (:func:`~perception.pose.pose_net.load_backbone`): the way to change the rotation head.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

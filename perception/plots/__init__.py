@@ -1,0 +1,1 @@
+"""Pictures of perception results: error against angles and size, estimates drawn on a scene."""
