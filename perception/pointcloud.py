@@ -32,8 +32,12 @@ SAMPLING_METHODS: tuple[str, ...] = get_args(SamplingMethod)
 
 
 @dataclass(frozen=True)
-class Intrinsics:
-    """Pinhole intrinsics in pixels (OpenCV convention)."""
+class Pinhole:
+    """Checked pinhole parameters in pixels (OpenCV convention): what back-projection needs.
+
+    Not a second camera description: ``generator.camera.Intrinsics`` is the camera (with its
+    image size); this is what ``pinhole_intrinsics`` makes of it, or of a bare 3x3 matrix ``K``,
+    after checking that every value is finite and the focal lengths positive."""
 
     fx: float
     fy: float
@@ -54,28 +58,28 @@ class Intrinsics:
         return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1]], dtype=np.float64)
 
 
-def pinhole_intrinsics(intrinsics: Any) -> Intrinsics:
-    """Checked :class:`Intrinsics` from anything with ``fx, fy, cx, cy`` (this module's
-    ``Intrinsics``, ``generator.camera.Intrinsics``) or from a 3x3 camera matrix ``K``.
+def pinhole_intrinsics(intrinsics: Any) -> Pinhole:
+    """Checked :class:`Pinhole` from anything with ``fx, fy, cx, cy`` (``generator.camera.Intrinsics``,
+    a ``Pinhole``) or from a 3x3 camera matrix ``K``.
 
     Raises :class:`PerceptionConfigError` naming the field: ``intrinsics`` for neither, ``fx``
     etc. for a value that is not finite or a focal length that is not positive (which would
     otherwise turn every point into NaN, reported as "too few points")."""
-    if isinstance(intrinsics, Intrinsics):
+    if isinstance(intrinsics, Pinhole):
         return intrinsics
     if isinstance(intrinsics, (np.ndarray, list, tuple)):
         K = np.asarray(intrinsics, dtype=np.float64)
         if K.shape != (3, 3) or K[0, 1] != 0 or K[1, 0] != 0 or not np.array_equal(K[2], [0, 0, 1]):
             raise PerceptionConfigError("intrinsics", "expected a pinhole camera matrix [[fx, 0, cx], [0, fy, cy], "
                                                       f"[0, 0, 1]], got {K.tolist()!r}")
-        return Intrinsics(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]))
+        return Pinhole(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]))
     names = ("fx", "fy", "cx", "cy")
     if not all(hasattr(intrinsics, n) for n in names):
         raise PerceptionConfigError("intrinsics", f"expected fx, fy, cx, cy or a 3x3 camera matrix, got "
                                                   f"{type(intrinsics).__name__}")
     values = [getattr(intrinsics, n) for n in names]
-    # numpy scalars count as numbers; anything else goes on to Intrinsics, which names it.
-    return Intrinsics(*(float(v) if isinstance(v, numbers.Real) and not isinstance(v, bool) else v for v in values))
+    # numpy scalars count as numbers; anything else goes on to Pinhole, which names it.
+    return Pinhole(*(float(v) if isinstance(v, numbers.Real) and not isinstance(v, bool) else v for v in values))
 
 
 def check_metres(depth: np.ndarray, name: str) -> None:
@@ -118,7 +122,7 @@ def depth_to_points(
     Args:
         depth: ``(H, W)`` metric depth (m); ``<= 0``, NaN and inf are invalid.
         intrinsics: pinhole intrinsics of the depth image (anything with fx, fy, cx, cy, e.g.
-            this module's ``Intrinsics`` or ``generator.camera.Intrinsics``, or a 3x3 camera
+            ``generator.camera.Intrinsics``, a ``Pinhole``, or a 3x3 camera
             matrix ``K``; see :func:`pinhole_intrinsics`).
         mask: optional ``(H, W)`` boolean instance mask; all pixels when ``None``.
         rgb: optional ``(H, W, 3)`` image (uint8 or float in [0, 1]).

@@ -12,7 +12,7 @@ from perception.errors import DegenerateCloud, NoEstimate, PerceptionConfigError
 from perception.pointcloud import (
     MIN_POINTS,
     MIN_SPREAD_M,
-    Intrinsics,
+    Pinhole,
     depth_to_points,
     farthest_point_indices,
     normalize_points,
@@ -21,7 +21,7 @@ from perception.pointcloud import (
     sample_points,
 )
 
-K = Intrinsics(fx=400.0, fy=380.0, cx=32.0, cy=24.0)
+K = Pinhole(fx=400.0, fy=380.0, cx=32.0, cy=24.0)
 
 
 def test_back_projection_follows_opencv_pinhole() -> None:
@@ -103,7 +103,7 @@ def test_normalise_round_trip() -> None:
 
 def test_intrinsics_validation_names_field() -> None:
     with pytest.raises(PerceptionConfigError, match="fy"):
-        Intrinsics(400.0, -1.0, 0.0, 0.0)
+        Pinhole(400.0, -1.0, 0.0, 0.0)
 
 
 def test_a_3x3_camera_matrix_is_accepted_as_intrinsics() -> None:

@@ -20,9 +20,10 @@ from functools import cache
 import numpy as np
 import trimesh
 
+from generator.camera import Intrinsics
 from generator.geometry import rotation_xyz
 from perception.errors import PerceptionConfigError
-from perception.pointcloud import MIN_POINTS, Intrinsics, depth_to_points
+from perception.pointcloud import MIN_POINTS, depth_to_points
 from perception.pose.data import PointCloudSample
 
 #: World-from-camera rotation for a camera looking straight down (OpenCV axes):
@@ -65,7 +66,7 @@ class ViewConfig:
 
     @property
     def intrinsics(self) -> Intrinsics:
-        return Intrinsics(self.focal_px, self.focal_px, self.width / 2.0, self.height / 2.0)
+        return Intrinsics(self.width, self.height, self.focal_px, self.focal_px, self.width / 2.0, self.height / 2.0)
 
 
 @dataclass(frozen=True)
@@ -165,7 +166,7 @@ def render_view(model: MeshModel, rng: np.random.Generator, config: ViewConfig |
     depth[~valid] = 0.0
     rgb = np.where(cap_px.reshape(h, w, 1), np.array(model.cap_rgb), np.array(model.stem_rgb))
     rgb = np.clip(rgb * rng.uniform(0.85, 1.0, (h, w, 1)), 0, 1).astype(np.float32)
-    crop = Intrinsics(K.fx, K.fy, K.cx - u0, K.cy - v0)
+    crop = Intrinsics(int(w), int(h), K.fx, K.fy, K.cx - u0, K.cy - v0)
     points, colors = depth_to_points(depth, crop, valid, rgb)
     return PointCloudSample(points, R_cm.astype(np.float32), colors, meta)
 
