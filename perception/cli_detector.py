@@ -105,12 +105,17 @@ def cmd_train_segmenter(args: argparse.Namespace) -> int:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     from perception.detection.detector_eval import evaluate_detector
-    from perception.detection.maskrcnn import MaskRCNNDetector
+    from perception.detection.load import describe_detector, load_detector
+    from perception.errors import PerceptionConfigError
 
     _set_threads(args.threads)
-    detector = MaskRCNNDetector.from_checkpoint(args.checkpoint, args.device, score_threshold=args.score_threshold)
-    report = evaluate_detector(detector, args.data, args.split, detector.config.category, args.min_area,
-                               args.score_threshold, args.max_images, progress=True)
+    overrides = {} if args.score_threshold is None else {"score_threshold": args.score_threshold}
+    detector = load_detector(args.checkpoint, **overrides)
+    if detector is None:
+        raise PerceptionConfigError("--checkpoint", "'oracle' is the ground truth itself; name a detector")
+    print(f"masks: {describe_detector(args.checkpoint)}")
+    report = evaluate_detector(detector, args.data, args.split, getattr(detector.config, "category", "mushroom"),
+                               args.min_area, detector.config.score_threshold, args.max_images, progress=True)
     print(report.markdown())
     if args.out:
         Path(args.out).write_text(json.dumps(report.to_dict(), indent=2), encoding="utf-8")
@@ -215,13 +220,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     p = subparsers.add_parser("eval-detector", help="COCO AP/AR and F1 (boxes and masks) of a detector on a split")
     _common(p)
-    p.add_argument("--checkpoint", required=True, help="train-detector checkpoint (best.pt)")
+    p.add_argument("--checkpoint", default="shipped",
+                   help="'shipped' (the shipped RGB-D segmenter, default) or a train-segmenter / train-detector checkpoint")
     p.add_argument("--split", choices=SPLITS, default="test")
     p.add_argument("--min-area", type=int, default=16, help="ground-truth masks smaller than this are ignored")
-    p.add_argument("--score-threshold", type=float, default=0.5, help="score threshold for F1")
+    p.add_argument("--score-threshold", type=float, default=None, help="score threshold for F1 (default: the detector's own)")
     p.add_argument("--max-images", type=_positive_int, help="evaluate only the first N images (N >= 1; default: all)")
     p.add_argument("--out", help="also write the report as JSON here")
-    p.add_argument("--device", default="cpu")
     p.set_defaults(func=_clear_errors(cmd_eval))
 
     p = subparsers.add_parser("eval-pipeline", help="detection recall/precision and pose errors of the two-stage pipeline")

@@ -4,8 +4,9 @@
 ``func`` to a callable taking the parsed args and returning an exit code. Runnable standalone as
 ``python -m perception.cli_pose {train-pose,eval-pose} ...``.
 
-Data: ``--scenes DIR`` reads per-instance clouds from a rendered scene dataset
-(``generator.dataset``; splits train/val, or ``--split`` for evaluation); ``--data`` reads per-instance samples from a ``.npz`` in the :mod:`perception.pose.data`
+Data: ``--scenes DIR [DIR ...]`` reads per-instance clouds from rendered scene datasets
+(``generator.dataset``; splits train/val, or ``--split`` for evaluation), cut out by the
+renderer's masks or, with ``--masks shipped|CHECKPOINT``, by a detector's; ``--data`` reads per-instance samples from a ``.npz`` in the :mod:`perception.pose.data`
 format (``--val-data`` likewise); without it, single-mushroom views are rendered on the fly by
 :mod:`perception.pose.synthetic_views` from the generator's model library with the given seeds.
 ``--add-synthetic N`` mixes N such views into ``--scenes`` training data; ``--init CHECKPOINT``
@@ -65,10 +66,25 @@ def _samples(
     return samples
 
 
+def _scene_samples(args: argparse.Namespace, split: str, seed: int) -> list:
+    """Per-instance samples of every ``--scenes`` folder's ``split``, cut out by ``--masks``."""
+    from perception.pose.data import samples_from_detections, samples_from_scenes
+
+    if args.masks == "oracle":
+        return [s for root in args.scenes for s in samples_from_scenes(root, split, cap_only=args.cap_only, seed=seed)]
+    if args.cap_only:
+        raise PerceptionConfigError("--cap-only", "needs --masks oracle (detectors find whole mushrooms)")
+    from perception.detection.load import load_detector
+
+    detector = load_detector(args.masks)
+    return [s for root in args.scenes
+            for s in samples_from_detections(root, split, detector, seed=seed, progress=not args.quiet)]
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     import torch
 
-    from perception.pose.data import PointCloudPoseDataset, samples_from_scenes
+    from perception.pose.data import PointCloudPoseDataset
     from perception.pose.pose_net import PoseNetConfig
     from perception.pose.train import TrainConfig, train
 
@@ -89,8 +105,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         print("error: --add-synthetic needs --scenes", file=sys.stderr)
         return 2
     if args.scenes:
-        train_s = samples_from_scenes(args.scenes, "train", cap_only=args.cap_only, seed=args.seed)
-        val_s = samples_from_scenes(args.scenes, "val", cap_only=args.cap_only, seed=args.seed + 1)
+        try:
+            train_s = _scene_samples(args, "train", args.seed)
+            val_s = _scene_samples(args, "val", args.seed + 1)
+        except (PerceptionConfigError, CheckpointFormatError, FileNotFoundError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
         if args.add_synthetic:
             train_s = train_s + _samples(
                 None, args.add_synthetic, args.seed * 1000 + 1, args.model_ids, cache, "train", args.procedural_models
@@ -161,8 +181,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )  # fmt: skip
     p.add_argument("--data", help="training samples .npz (perception.pose.data format) instead of rendering")
     p.add_argument("--val-data", help="validation samples .npz")
-    p.add_argument("--scenes", help="rendered scene dataset folder (generator.dataset): its train/val splits")
-    p.add_argument("--cap-only", action="store_true", help="with --scenes: cap points only")
+    p.add_argument("--scenes", nargs="+", help="rendered scene dataset folders (generator.dataset): their train/val splits")
+    p.add_argument("--masks", default="oracle",
+                   help="with --scenes: whose masks cut out each mushroom's points: 'oracle' (the renderer's, default), "
+                        "'shipped' (the shipped RGB-D segmenter's, matched to the truth by IoU >= 0.5) or a detector "
+                        "checkpoint")
+    p.add_argument("--cap-only", action="store_true", help="with --scenes and oracle masks: cap points only")
     p.add_argument("--cache", help="folder to cache rendered views as .npz")
     p.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this wall time")
     p.add_argument("--select-by", choices=("loss", "axis"), default="loss",

@@ -115,8 +115,9 @@ def read_scene_files(scene_dir: str | Path, verify: bool = True) -> SceneSample:
                        lm, lc, amodal, record, anns.get("annotations", []))
 
 
-def _scene_indices(root: Path, split: str | None) -> list[int]:
-    path = root / "manifest.json"
+def scene_indices(root: str | Path, split: str | None) -> list[int]:
+    """Indices of a dataset's complete scenes (of ``split``, or all), in the manifest's order."""
+    path = Path(root) / "manifest.json"
     manifest = _json(path, _read_bytes(path))
     try:
         return [e["index"] for e in manifest["scenes"] if split is None or e["split"] == split]
@@ -133,7 +134,7 @@ class SceneDataset(Dataset):
     def __init__(self, root: str | Path, split: str | None = None, verify: bool = True) -> None:
         self.root = Path(root)
         self.verify = verify
-        self.indices = _scene_indices(self.root, split)
+        self.indices = scene_indices(self.root, split)
 
     def __len__(self) -> int:
         return len(self.indices)
@@ -185,7 +186,7 @@ class InstancePointCloudDataset(Dataset):
         self.num_points, self.cap_only, self.seed, self.verify = num_points, cap_only, seed, verify
         category = 2 if cap_only else 1
         self.items: list[tuple[int, int]] = []
-        for idx in _scene_indices(self.root, split):
+        for idx in scene_indices(self.root, split):
             path = self.root / scene_dirname(idx) / "annotations.json"
             anns = _json(path, _read_bytes(path)).get("annotations", [])
             self.items += [(idx, a["instance_id"]) for a in anns
@@ -247,4 +248,4 @@ def load_scenes(root: str | Path, split: str | None = None, verify: bool = True)
     """Every complete scene of a dataset (or of one split), in index order; ``verify`` checks
     each ``scene.json`` against the checksum its ``DONE`` records (as ``SceneDataset`` does)."""
     root = Path(root)
-    return [load_scene(root, i, verify) for i in _scene_indices(root, split)]
+    return [load_scene(root, i, verify) for i in scene_indices(root, split)]

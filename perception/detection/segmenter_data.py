@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from generator.dataset.readers import _scene_indices, read_scene_files
+from generator.dataset.readers import read_scene_files, scene_indices
 from generator.dataset.writer import scene_dirname
 from perception.detection.rgbd_segmenter import OFFSET_SCALE, centre_heatmap, network_input
 from perception.errors import PerceptionConfigError
@@ -78,7 +78,7 @@ def scene_folders(roots: list[str | Path], split: str) -> list[Path]:
         root = Path(root)
         if not (root / "manifest.json").is_file():
             raise FileNotFoundError(f"{root}: no manifest.json (is it a finished `sms3d generate` folder?)")
-        folders += [root / scene_dirname(i) for i in _scene_indices(root, split)]
+        folders += [root / scene_dirname(i) for i in scene_indices(root, split)]
     return folders
 
 

@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from generator.dataset.readers import SceneSample, read_scene_files
+from generator.dataset.readers import SceneSample, read_scene_files, scene_indices
 from generator.dataset.writer import scene_dirname
 from generator.geometry import tilt_angle
 from perception.detection.detector import detections_from_labels, mask_iou
-from perception.detection.detector_data import first_n, load_coco
+from perception.detection.detector_data import first_n
 from perception.pipeline import MushroomEstimate, PosePipeline
 
 SIZE_BINS_MM = (0.0, 35.0, 50.0, 65.0, 200.0)
@@ -162,10 +162,6 @@ def match(estimates: list[MushroomEstimate], truth: list[GroundTruthMushroom], m
     return rows
 
 
-def scene_indices(root: str | Path, split: str) -> list[int]:
-    return [im["scene_id"] for im in sorted(load_coco(root, split)["images"], key=lambda im: im["id"])]
-
-
 def run_scene(pipeline: PosePipeline, sample: SceneSample, oracle: bool) -> list[MushroomEstimate]:
     detections = detections_from_labels(sample.labels_mushroom) if oracle else None
     return pipeline(sample.rgb, sample.depth, sample.intrinsics, sample.world_from_camera, detections)
@@ -175,7 +171,7 @@ def evaluate_pipeline(pipeline: PosePipeline, root: str | Path, split: str = "te
                       min_area: int = 16, max_scenes: int | None = None, progress: bool = False) -> PipelineReport:
     """Run ``pipeline`` (its detector, or oracle masks) on the first ``max_scenes`` scenes of
     ``split`` (all of them for ``None``) and match."""
-    indices = first_n(scene_indices(root, split), max_scenes, "max_scenes")
+    indices = first_n(scene_indices(Path(root), split), max_scenes, "max_scenes")
     if progress:
         from tqdm import tqdm
         indices = tqdm(indices, desc=f"eval-pipeline {split}", unit="scene")

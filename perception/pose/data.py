@@ -167,3 +167,59 @@ def samples_from_scenes(
         meta = dict(item["meta"])
         out.append(PointCloudSample(item["points"].numpy(), item["rotation"].numpy(), None, meta))
     return out
+
+
+def samples_from_detections(
+    root: str | Path, split: str | None, detector: Any, num_points: int = 2048, seed: int = 0,
+    min_iou: float = 0.5, progress: bool = False,
+) -> list[PointCloudSample]:
+    """Per-instance samples cut out by a stage-1 ``detector``'s masks instead of the renderer's.
+
+    Each scene's detections are matched to its ground-truth mushrooms by visible-mask IoU (>=
+    ``min_iou``, best score first, one detection per mushroom); a matched detection's valid
+    depth pixels become the sample's points, labelled with that mushroom's rotation. So the pose
+    network learns from the masks it will be given: their soil pixels at the borders, their
+    missing bits, the camera's noise. Unmatched detections and mushrooms are left out.
+    """
+    from generator.dataset.readers import instance_in_camera, read_scene_files, scene_indices
+    from generator.dataset.writer import scene_dirname
+    from generator.geometry import tilt_angle
+    from perception.detection.detector import mask_iou
+    from perception.pointcloud import depth_to_points
+
+    root = Path(root)
+    indices = scene_indices(root, split)
+    if progress:
+        from tqdm import tqdm
+
+        indices = tqdm(indices, desc=f"masks of {root.name}/{split}", unit="scene")
+    out = []
+    for index in indices:
+        s = read_scene_files(root / scene_dirname(index), verify=False)
+        detections = sorted(detector.detect(s.rgb, s.depth), key=lambda d: -d.score)
+        taken: set[int] = set()
+        for det in detections:
+            candidates = np.unique(s.labels_mushroom[det.mask])
+            best, best_iou = None, min_iou
+            for value in candidates[candidates > 0]:
+                iid = int(value) - 1
+                if iid in taken:
+                    continue
+                iou = mask_iou(det.mask, s.labels_mushroom == value)
+                if iou >= best_iou:
+                    best, best_iou = iid, iou
+            if best is None:
+                continue
+            taken.add(best)
+            points, _ = depth_to_points(s.depth, s.intrinsics, det.mask)
+            if len(points) < MIN_POINTS:
+                continue
+            rng = np.random.default_rng(np.random.SeedSequence([seed, index, best]))
+            pick = rng.choice(len(points), num_points, replace=len(points) < num_points)
+            inst = next(m for m in s.record["instances"] if m["id"] == best)
+            gt = instance_in_camera(inst, s.world_from_camera)
+            meta = {"scene_id": index, "instance_id": best, "species": inst["species"],
+                    "cap_diameter": inst["cap_diameter"], "num_valid": len(points), "mask_iou": best_iou,
+                    "tilt_deg": float(np.degrees(tilt_angle(np.asarray(inst["rotation"]))))}
+            out.append(PointCloudSample(points[pick].astype(np.float32), gt["rotation"].astype(np.float32), None, meta))
+    return out
