@@ -81,18 +81,13 @@ def _config(args: argparse.Namespace):
 
 def run_generate(args: argparse.Namespace) -> int:
     from generator.dataset.errors import DatasetError
-    from generator.dataset.options import DatasetOptions, RealismOptions
+    from generator.dataset.options import REALISM_SWITCHES, DatasetOptions, RealismOptions
     from generator.dataset.runner import generate_dataset
 
     try:
         cfg = _config(args)
-        a = args.realism
-        options = DatasetOptions(split_ratios=args.split_ratios, shadows=args.shadows, realism=RealismOptions(
-            depth_noise=a or args.depth_noise, edge_holes=a or args.edge_holes, lighting=a or args.lighting,
-            soil=a or args.soil, camera_jitter=a or args.camera_jitter, correlated_noise=a or args.correlated_noise,
-            disparity_quantisation=a or args.disparity_quantisation, flying_pixels=a or args.flying_pixels,
-            stereo_shadows=a or args.stereo_shadows, rgb_noise=a or args.rgb_noise, rgb_blur=a or args.rgb_blur,
-            exposure=a or args.exposure))
+        realism = RealismOptions(**{name: args.realism or getattr(args, name) for name in REALISM_SWITCHES})
+        options = DatasetOptions(split_ratios=args.split_ratios, shadows=args.shadows, realism=realism)
         if args.workers < 1:
             raise ConfigError("--workers", "must be >= 1")
         manifest = generate_dataset(args.out, cfg, args.num_scenes, args.seed, options=options, workers=args.workers,

@@ -71,6 +71,11 @@ class RealismOptions:
             if getattr(self, name) > limit:
                 raise ConfigError(f"realism.{name}", f"must be <= {limit:g}")
 
+    @classmethod
+    def all_on(cls) -> RealismOptions:
+        """Every effect on with its default parameters (``sms3d generate --realism``)."""
+        return cls(**{name: True for name in REALISM_SWITCHES})
+
     @property
     def depth_any(self) -> bool:
         """Whether ``apply_depth_realism`` changes the depth image."""
@@ -97,9 +102,12 @@ class RealismOptions:
         return d
 
 
-# The stereo camera model and RGB sensor effects, added after the options above.
+# The switches of the options first offered (lighting, soil and camera jitter, white depth noise,
+# edge holes), then those of the stereo camera model and RGB sensor effects added after them.
+ORIGINAL_SWITCHES = ("depth_noise", "edge_holes", "lighting", "soil", "camera_jitter")
 CAMERA_MODEL_SWITCHES = ("correlated_noise", "disparity_quantisation", "flying_pixels", "stereo_shadows",
                          "rgb_noise", "rgb_blur", "exposure")
+REALISM_SWITCHES = (*ORIGINAL_SWITCHES, *CAMERA_MODEL_SWITCHES)
 CAMERA_MODEL_FIELDS = (*CAMERA_MODEL_SWITCHES, "matching_window_px", "disparity_step_px",
                        "flying_pixel_probability", "stereo_shadows_left_band", "rgb_noise_gain",
                        "rgb_read_noise_dn", "blur_sigma_max_px", "exposure_stops")
