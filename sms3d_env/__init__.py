@@ -20,10 +20,10 @@ _EXPORTS = {
     "FAILURE_CAUSES": "picking_model", "SMS3DPickEnv": "pick_env",
     "EpisodeState": "picking_model", "PickingModel": "picking_model",
     "World": "world", "build_world": "world",
-    "NoisyPose": "pose_source", "OraclePose": "pose_source", "PoseEstimate": "pose_source",
-    "PoseSource": "pose_source", "make_pose_source": "pose_source",
-    "TOOLS": "robot", "RobotConfig": "robot",
-    "HandPicker": "scripted_picker", "ScriptedPicker": "scripted_picker", "run_episode": "scripted_picker",
+    "NoisyPose": "pose_sources", "OraclePose": "pose_sources", "PoseEstimate": "pose_sources",
+    "PoseSource": "pose_sources", "UniformNoisyPose": "pose_sources", "make_pose_source": "pose_sources",
+    "Tool": "tools", "TOOLS": "robot", "RobotConfig": "robot",
+    "HandPicker": "pickers.scripted", "ScriptedPicker": "pickers.scripted", "run_episode": "pickers.episode",
 }  # fmt: skip
 
 __all__ = sorted(_EXPORTS)

@@ -105,26 +105,12 @@ class IKController:
             home[self.arm_qadr] = q_home
         self.posture_task.set_target(home)
 
-    @property
-    def q_cmd(self) -> np.ndarray:
-        return self.configuration.q[self.arm_qadr].copy()
-
-    def tool_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        """Commanded tool site position and rotation matrix."""
-        d = self.configuration.data
-        return d.site_xpos[self.site_id].copy(), d.site_xmat[self.site_id].reshape(3, 3).copy()
-
     def _solve(self, target: mink.SE3, dt: float) -> np.ndarray:
         self.frame_task.set_target(target)
         v = mink.solve_ik(self.configuration, self.tasks, dt, "daqp", damping=self.cfg.damping,
                           limits=self.limits)
         self.configuration.integrate_inplace(v, dt)
         return self.configuration.q[self.arm_qadr]
-
-    def solve_to(self, pos: np.ndarray, rot: np.ndarray, dt: float | None = None) -> np.ndarray:
-        """One IK step toward a tool pose; returns the new commanded arm angles."""
-        target = mink.SE3.from_rotation_and_translation(mink.SO3.from_matrix(rot), pos)
-        return self._solve(target, self.dt if dt is None else dt)
 
     def step(self, twist: np.ndarray, q_measured: np.ndarray) -> np.ndarray:
         """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period."""
@@ -146,20 +132,3 @@ class IKController:
             mujoco.mju_mulQuat(quat, turn, quat.copy())
         pos = d.site_xpos[self.site_id] + twist[:3] * self.dt
         return self._solve(mink.SE3(np.concatenate([quat, pos])), self.dt)
-
-    def reaches(self, pos: np.ndarray, rot: np.ndarray, q_start: np.ndarray, iters: int = 60,
-                pos_tol: float = 0.004, ang_tol_deg: float = 4.0) -> tuple[bool, np.ndarray]:
-        """Whether IK from ``q_start`` converges to the pose (state restored afterwards)."""
-        saved = self.configuration.q.copy()
-        self.reset(q_start)
-        ok = False
-        for _ in range(iters):
-            self.solve_to(pos, rot, dt=0.05)
-            p, r = self.tool_pose()
-            ang = np.degrees(np.arccos(np.clip((np.trace(rot.T @ r) - 1) / 2, -1, 1)))
-            if np.linalg.norm(p - pos) < pos_tol and ang < ang_tol_deg:
-                ok = True
-                break
-        q = self.q_cmd
-        self.configuration.update(saved)
-        return ok, q

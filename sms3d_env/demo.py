@@ -72,7 +72,8 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
     from generator import SceneConfig, generate_scene
     from generator.files import save_rgb_png
     from generator.preview import save_preview
-    from sms3d_env.scripted_picker import ScriptedPicker, run_episode
+    from sms3d_env.pickers.episode import run_episode
+    from sms3d_env.pickers.scripted import ScriptedPicker
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -2,9 +2,11 @@
 tool (default) or the Jaco 3-finger hand.
 
 The env holds the gym API only: spaces, reset/step, observation, reward assembly and rendering.
-The world (scene + robot model and its id tables) is :mod:`sms3d_env.world`; the picking rules
-(seal, grip, roots, bruising, neighbours, success and failure) are :mod:`sms3d_env.picking_model`,
-called after every physics substep; the reward terms are :mod:`sms3d_env.rewards`.
+The beds come from :mod:`sms3d_env.scene_source`; the world (scene + robot model and its id
+tables) is :mod:`sms3d_env.world`; the picking rules (roots, bruising, neighbours, success and
+failure) are :mod:`sms3d_env.picking_model`, called after every physics substep, with each tool's
+own (suction: valve, seal, grip; hand: fingers) in :mod:`sms3d_env.tools`; the reward terms are
+:mod:`sms3d_env.rewards`.
 """
 
 from __future__ import annotations
@@ -23,12 +25,12 @@ from gymnasium import spaces
 from generator.gl import open_renderer
 from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.env_args import RENDER_MODES, SUCTION_MODES, check_env_args
-from sms3d_env.hand import HandGrasp
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
-from sms3d_env.pose_source import PoseSource, make_pose_source
+from sms3d_env.pose_sources import PoseSource, make_pose_source
 from sms3d_env.rewards import RewardState, compute_reward, reward_terms
 from sms3d_env.robot import RobotConfig
+from sms3d_env.scene_source import SceneSource
 from sms3d_env.targets import Reachability, select_target
 from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
 from sms3d_env.world import World, build_world
@@ -175,14 +177,7 @@ class SMS3DPickEnv(gym.Env):
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
         self.render_mode = render_mode
-        self.scene_config = scene_config
-        if isinstance(scenes, (str, os.PathLike)):
-            from generator.dataset.readers import load_scenes
-
-            scenes = load_scenes(scenes)
-            if not scenes:
-                raise ValueError("scenes: the dataset folder holds no complete scene")
-        self.scenes = list(scenes) if scenes is not None else None
+        self.scene_source = SceneSource(scene_config, scenes, scene_pool, pool_seed)
         self.pose_source = make_pose_source(pose_source, pose_error_deg, position_noise)
         self.target_rule, self.target_index = target_rule, target_index
         self.reward_type = reward_type
@@ -195,9 +190,6 @@ class SMS3DPickEnv(gym.Env):
         self.free_radius = free_radius
         self.suction_mode, self.end_on_dead_end = suction_mode, bool(end_on_dead_end)
         self.task_obs, self.horizon = bool(task_obs), horizon
-        self.scene_pool, self.pool_seed = scene_pool, pool_seed
-        self._pool: dict[int, Any] = {}
-        self._pool_models: dict[tuple[int, int], mujoco.MjModel] = {}
 
         self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
         self.home_q = np.asarray(self.robot_cfg.home_q, float)
@@ -214,7 +206,6 @@ class SMS3DPickEnv(gym.Env):
         self.observation_space = spaces.Dict(obs)
         self.world: World | None = None
         self.picking: PickingModel | None = None
-        self.hand: HandGrasp | None = None
         self.target_pose = np.zeros(6)  # the estimate in the observation: cap top, stem axis
         self.done = False  # the episode terminated or was truncated
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
@@ -237,29 +228,11 @@ class SMS3DPickEnv(gym.Env):
         """Control steps taken in this episode."""
         return self.picking.steps
 
-    def _scene_for_reset(self, options: dict[str, Any]) -> tuple[Any, int | None]:
-        """The reset's scene, and its pool slot (None outside a pool)."""
-        if self.scenes is not None:
-            k = options.get("scene")
-            k = int(self.np_random.integers(len(self.scenes))) if k is None else int(k)
-            return self.scenes[k], None
-        import generator
-
-        cfg = self.scene_config
-        if cfg is None:
-            cfg = generator.SceneConfig().replace(placement__num_mushrooms=25)
-        if not self.scene_pool:
-            return generator.generate_scene(cfg, seed=int(self.np_random.integers(2**31 - 1))), None
-        k = int(self.np_random.integers(self.scene_pool))
-        if k not in self._pool:
-            self._pool[k] = generator.generate_scene(cfg, seed=self.pool_seed + k)
-        return self._pool[k], k
-
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = dict(options or {})
-        scene, slot = self._scene_for_reset(options)
+        scene, slot = self.scene_source.draw(self.np_random, options)
         rule, index = ("index", int(options["target"])) if "target" in options else (self.target_rule, self.target_index)
         target, reachable = select_target(scene, rule, self.np_random, self.reach, index=index,
                                           max_tilt_deg=self.max_tilt_deg)
@@ -267,16 +240,14 @@ class SMS3DPickEnv(gym.Env):
         self.target_pose = np.concatenate([estimate.cap_top, estimate.stem_axis])
         self._disown_renderers()
         self.world = w = build_world(scene, target, self.robot_cfg, self.free_radius,
-                                     self.control_dt / self.substeps, self._pool_models,
+                                     self.control_dt / self.substeps, self.scene_source.models,
                                      None if slot is None else (slot, target))
-        self.hand = HandGrasp(w.model) if self.tool == "hand" else None
-        self.picking = PickingModel(w, self.params, target, reachable, self.hand)
+        self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
         self.done = False
         m, d = w.model, w.data
         d.qpos[w.arm_qadr] = self.home_q
         d.ctrl[:6] = self.home_q
-        if self.hand is not None:
-            self.hand.open(d)
+        self.picking.tool.reset()
         # Posture target of the IK: the arm's configuration at a pre-grasp pose above the
         # *estimated* target (the pose the policy sees). Home holds the cup pointing down near the
         # Jaco's wrist singularity (joint 5 ~ 0, joints 4 and 6 aligned); a posture target at home
@@ -303,10 +274,7 @@ class SMS3DPickEnv(gym.Env):
         if self.done:
             warnings.warn("step() called after the episode ended (terminated or truncated); call "
                           "reset(). The episode stays ended.", stacklevel=2)
-        # A latched valve stays open while the seal it made holds, whatever the command.
-        picking.begin_step(bool(a[6] > 0) or (self.suction_mode == "latched" and ep.grip >= 0))
-        if self.hand is not None:
-            self.hand.command(d, float(a[6]))
+        picking.begin_step(float(a[6]))  # the tool's command (suction: the valve; hand: fingers)
         try:
             d.ctrl[:6] = self.ik.step(a[:6] * self._twist_scale, d.qpos[w.arm_qadr])
         except Exception:  # mink raises when the QP has no solution: hold the last command
@@ -323,7 +291,7 @@ class SMS3DPickEnv(gym.Env):
         picking.after_step()
         info = picking.evaluate()
         terminated = (info["is_success"] or bool(ep.bruised) or (ep.target_detached and ep.grip_lost)
-                      or (self.end_on_dead_end and picking.dead_end(self.suction_mode == "latched"))
+                      or (self.end_on_dead_end and picking.dead_end())
                       or self.done)
         truncated = ep.unstable
         self.done = terminated or truncated
@@ -356,19 +324,15 @@ class SMS3DPickEnv(gym.Env):
 
     # ------------------------------------------------------------------ observation
     def _obs(self) -> dict[str, np.ndarray]:
-        w, ep = self.world, self.picking.state
+        w = self.world
         d = w.data
         pos = d.site_xpos[w.tool_site]
         quat = np.empty(4)
         mujoco.mju_mat2Quat(quat, d.site_xmat[w.tool_site])
         # One flat vector, one finiteness check, then views per entry (small-array numpy calls
         # dominate here, not arithmetic).
-        if self.hand is None:
-            tool = (float(ep.tool_on), float(ep.grip >= 0), ep.grip_util)
-        else:
-            tool = (self.hand.closure(d), float(ep.grip >= 0), ep.finger_force)
-        parts = [d.qpos[w.arm_qadr], d.qvel[w.arm_dadr], pos, quat, tool, self.target_pose,
-                 self.target_pose[:3] - pos]
+        parts = [d.qpos[w.arm_qadr], d.qvel[w.arm_dadr], pos, quat, self.picking.tool.observation(),
+                 self.target_pose, self.target_pose[:3] - pos]
         if self.task_obs:
             parts += self._task_obs()
         flat = np.concatenate(parts)

@@ -19,15 +19,6 @@ from sms3d_env.robot import PREFIX, TOOL_SITE
 RULES = ("tallest", "largest", "index", "random")
 
 
-def tool_rotation_for_axis(axis: np.ndarray) -> np.ndarray:
-    """A tool rotation whose +z is ``-axis`` (cup facing the cap along the stem), roll fixed."""
-    z = -np.asarray(axis, float) / np.linalg.norm(axis)
-    ref = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    x = np.cross(ref, z)
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z])
-
-
 class Reachability:
     """IK feasibility on the arm-only model (a few ms per query)."""
 

@@ -17,7 +17,6 @@ import mujoco
 import numpy as np
 
 from sms3d_env import physics as ph
-from sms3d_env.hand import add_stem_sockets
 from sms3d_env.robot import (
     ARM_JOINTS,
     CUP_BODY,
@@ -29,6 +28,7 @@ from sms3d_env.robot import (
     RobotConfig,
     attach_robot,
 )
+from sms3d_env.tools.hand import add_stem_sockets
 
 _STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 

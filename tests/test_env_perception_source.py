@@ -13,7 +13,7 @@ from generator.dataset.render import SceneRenderer
 from perception.detection.detector import detections_from_labels
 from perception.pipeline import PosePipeline
 from perception.pose.estimator import PoseEstimator
-from sms3d_env.perception_source import PerceptionPose
+from sms3d_env.pose_sources.perception import PerceptionPose
 
 
 class LabelDetector:

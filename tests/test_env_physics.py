@@ -6,7 +6,7 @@ import pytest
 
 import generator
 import sms3d_env
-from sms3d_env.pose_source import NoisyPose, OraclePose
+from sms3d_env.pose_sources import NoisyPose, OraclePose
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
 

@@ -222,6 +222,12 @@ def test_env_refuses_arguments_it_would_ignore_or_misread(kwargs, field):
         sms3d_env.SMS3DPickEnv(**kwargs)
 
 
+def test_gym_make_refuses_a_pose_error_the_oracle_would_ignore():
+    with pytest.raises(ValueError, match=r"apply to pose_source='noisy' only; with pose_source='oracle' "
+                                         r"they would be ignored \(got pose_error_deg=10"):
+        gym.make("SMS3DPick-v0", pose_source="oracle", pose_error_deg=10)
+
+
 _NON_FINITE_OR_NEGATIVE = st.one_of(st.floats(allow_nan=True, allow_infinity=True).filter(
     lambda v: not (math.isfinite(v) and v >= 0)), st.booleans(), st.text(max_size=3))
 
@@ -246,8 +252,8 @@ def test_env_image_size_property(size):
 
 
 def test_a_zero_residual_is_the_scripted_picker_exactly():
-    from sms3d_env.residual import ResidualPicker
-    from sms3d_env.scripted_picker import run_episode
+    from sms3d_env.pickers import run_episode
+    from sms3d_env.training.residual import ResidualPicker
 
     plain = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
     expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
@@ -265,7 +271,7 @@ def test_a_zero_residual_is_the_scripted_picker_exactly():
 
 
 def test_uniform_noisy_pose_errs_within_its_range():
-    from sms3d_env.pose_source import UniformNoisyPose
+    from sms3d_env.pose_sources import UniformNoisyPose
 
     scene = generator.generate_scene(SMALL, seed=0)
     source, rng = UniformNoisyPose(10.0, 30.0), np.random.default_rng(0)
@@ -279,12 +285,12 @@ def test_uniform_noisy_pose_errs_within_its_range():
 
 
 def test_scene_pool_reuses_beds_and_replays_episodes_exactly():
-    from sms3d_env.scripted_picker import run_episode
+    from sms3d_env.pickers import run_episode
 
     env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL, scene_pool=1, pool_seed=7)
     picker = ScriptedPicker.for_env(env)
     first = run_episode(env, picker, seed=4)
-    assert env.unwrapped.scene is env.unwrapped._pool[0]
+    assert env.unwrapped.scene is env.unwrapped.scene_source.pool[0]
     expected = generator.generate_scene(SMALL, seed=7)
     np.testing.assert_array_equal(env.unwrapped.scene.terrain.heights, expected.terrain.heights)
     # The pool's compiled model is copied per episode: a replay is the same episode.

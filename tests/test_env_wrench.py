@@ -74,14 +74,14 @@ def test_env_grip_wrench_is_about_the_cup_contact():
     qadr = m.jnt_qposadr[m.body_jntadr[b]]
     d.qpos[qadr : qadr + 3] += d.site_xpos[env.world.tool_site] - d.site_xpos[env.world.cap_top_sites[k]]
     mujoco.mj_forward(m, d)
-    env.picking.grip(k, d.site_xpos[env.world.tool_site].copy())  # sealed where the cup is now
+    env.picking.tool.grip(k, d.site_xpos[env.world.tool_site].copy())  # sealed where the cup is now
     m.body_gravcomp[b] = 0.0
     f_app = np.array([0.1, 0.05, -0.2])
     d.xfrc_applied[b, :3] = f_app
     for _ in range(1500):
         mujoco.mj_step(m, d)
     mujoco.mj_forward(m, d)
-    force, moment, z = env.picking.grip_wrench()
+    force, moment, z = env.picking.tool.grip_wrench()
     load = f_app + m.body_subtreemass[b] * m.opt.gravity
     np.testing.assert_allclose(force, -load, atol=2e-3)
     pc = d.site_xpos[env.world.tool_site]

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
+import importlib
 import subprocess
 import sys
 
 import pytest
 
-import generator
 from generator.lazy import lazy_exports
 
 
@@ -22,13 +22,17 @@ def test_a_name_loads_its_submodule_once_and_unknown_names_fail() -> None:
         getattr_("Nope")
 
 
-def test_packages_export_every_public_name() -> None:
-    for name in generator.__all__:
-        assert getattr(generator, name) is not None
-    assert set(generator.__all__) <= set(dir(generator))
+@pytest.mark.parametrize("package", ["generator", "sms3d_env", "sms3d_env.pickers", "sms3d_env.pose_sources",
+                                     "sms3d_env.tools", "sms3d_env.training"])
+def test_packages_export_every_public_name(package: str) -> None:
+    module = importlib.import_module(package)
+    for name in module.__all__:
+        assert getattr(module, name) is not None, name
+    assert set(module.__all__) <= set(dir(module))
 
 
 def test_importing_the_packages_loads_no_heavy_module() -> None:
-    code = "import sys, generator, generator.dataset, sms3d_env; print(sorted({'mujoco', 'trimesh', 'torch', 'mink'} & set(sys.modules)))"
+    code = ("import sys, generator, generator.dataset, sms3d_env, sms3d_env.pickers, sms3d_env.training, "
+            "sms3d_env.study; print(sorted({'mujoco', 'trimesh', 'torch', 'mink'} & set(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"

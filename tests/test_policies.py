@@ -9,10 +9,10 @@ import json
 import numpy as np
 import pytest
 
-from sms3d_env.accuracy_study import SweepConfig, run_sweep
-from sms3d_env.imitation import BCConfig, train_bc
-from sms3d_env.pickers import PickerSpec, make_picker_env, parse_picker
+from sms3d_env.pickers.registry import PickerSpec, make_picker_env, parse_picker
+from sms3d_env.study.sweep import SweepConfig, run_sweep
 from sms3d_env.training import SHIPPED_POLICY, PolicyActor, main
+from sms3d_env.training.imitation import BCConfig, train_bc
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +97,7 @@ def test_the_shipped_policy_loads_and_was_trained_on_the_training_id():
 
 
 def test_learning_curve_reads_evaluations_with_their_wall_time(tmp_path, capsys):
-    from sms3d_env.learning_curve import read_curve
+    from sms3d_env.training.learning_curve import read_curve
 
     run = tmp_path / "ppo_s0"
     run.mkdir()

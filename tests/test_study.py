@@ -9,9 +9,9 @@ from hypothesis import strategies as st
 from generator.cli import main
 from generator.dataset.errors import CorruptFileError
 from generator.errors import ConfigError
-from sms3d_env import study_report
-from sms3d_env.accuracy_study import SweepConfig, plan_tasks, run_sweep
-from sms3d_env.study_report import success_table, tolerable_error, wilson_interval, write_report
+from sms3d_env.study import report as study_report
+from sms3d_env.study.report import success_table, tolerable_error, wilson_interval, write_report
+from sms3d_env.study.sweep import SweepConfig, plan_tasks, run_sweep
 
 
 def test_wilson_interval_known_values():
@@ -171,7 +171,7 @@ def test_a_failed_report_leaves_no_earlier_report_behind(tmp_path, monkeypatch):
 
 
 def test_mcnemar_counts_only_discordant_pairs():
-    from sms3d_env.study_report import mcnemar_p
+    from sms3d_env.study.report import mcnemar_p
 
     same = [True, False, True]
     assert mcnemar_p(same, same) == 1.0

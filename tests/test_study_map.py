@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from generator import SceneConfig, generate_scene
-from sms3d_env.accuracy_study import SweepConfig, plan_tasks, run_sweep
-from sms3d_env.pose_source import NoisyPose, OraclePose
-from sms3d_env.study_map import region_summary, success_grid, tolerance_region
-from sms3d_env.study_report import write_report
+from sms3d_env.pose_sources import NoisyPose, OraclePose
+from sms3d_env.study.report import write_report
+from sms3d_env.study.success_map import region_summary, success_grid, tolerance_region
+from sms3d_env.study.sweep import SweepConfig, plan_tasks, run_sweep
 
 
 def _cell_rows(success_by_cell, n=20, tool="suction", size=25):

@@ -49,12 +49,13 @@ def parse_picker(text: str) -> PickerSpec:
 def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     """``(env, picker)``: the env the picker was trained on (``env_kwargs`` added) and the picker,
     a callable ``obs -> action``. A learned picker sets torch to one intra-op thread."""
-    from sms3d_env.training import SHIPPED_POLICY, PolicyActor, _make_env
+    from sms3d_env.training.actor import SHIPPED_POLICY, PolicyActor
+    from sms3d_env.training.envs import make_env
 
     if spec.kind == "scripted":
-        from sms3d_env.scripted_picker import ScriptedPicker
+        from sms3d_env.pickers.scripted import ScriptedPicker
 
-        env = _make_env("SMS3DPick-v0", **env_kwargs)
+        env = make_env("SMS3DPick-v0", **env_kwargs)
         return env, ScriptedPicker.for_env(env)
     import torch
 
@@ -63,5 +64,5 @@ def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     # ran the policy sweep ~2.5x slower).
     torch.set_num_threads(1)
     actor = PolicyActor(spec.path or SHIPPED_POLICY)
-    env = _make_env(actor.env_id, actor.residual_scale, **{**env_kwargs, **actor.env_options})
+    env = make_env(actor.env_id, actor.residual_scale, **{**env_kwargs, **actor.env_options})
     return env, actor

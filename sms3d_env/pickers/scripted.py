@@ -13,16 +13,15 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 
 
-def _quat_to_mat(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+def _tool_axis(quat: np.ndarray) -> np.ndarray:
+    """The tool's approach axis (its frame's z, world) from the observed quaternion (w, x, y, z)."""
+    mat = np.empty(9)
+    mujoco.mju_quat2Mat(mat, np.asarray(quat, np.float64))
+    return mat[2::3]
 
 
 class _View(NamedTuple):
@@ -100,7 +99,7 @@ class ScriptedPicker:
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         axis = obs["target_pose"][3:]
-        o = _View(p=obs["tool_pose"][:3], z=_quat_to_mat(obs["tool_pose"][3:])[:, 2],
+        o = _View(p=obs["tool_pose"][:3], z=_tool_axis(obs["tool_pose"][3:]),
                   c=obs["target_pose"][:3], axis=axis / np.linalg.norm(axis),
                   held=bool(obs["suction"][1] > 0.5))
         return getattr(self, "_" + self.phase)(o)
@@ -201,22 +200,3 @@ class HandPicker(ScriptedPicker):
         if self.count >= self.close_steps:
             self.phase, self.count = "twist", 0
         return self._action(np.zeros(3), self._align(o), self.hold_command)
-
-
-def run_episode(env: gym.Env, policy: Any, seed: int, options: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Run one episode; ``policy(obs) -> action`` (``policy.reset()`` is called if present)."""
-    obs, info = env.reset(seed=seed, options=options)
-    if hasattr(policy, "reset"):
-        policy.reset()
-    total, steps = 0.0, 0
-    terminated = truncated = False
-    while not (terminated or truncated):
-        obs, reward, terminated, truncated, info = env.step(policy(obs))
-        total += float(reward)
-        steps += 1
-    return {
-        "seed": seed, "success": bool(info["is_success"]), "failure_cause": info["failure_cause"],
-        "reachable": bool(info["reachable"]), "target": int(info["target"]), "steps": steps,
-        "return": total, "neighbours_disturbed": int(info["neighbours_disturbed"]),
-        "bruised": bool(info["bruised"]), "target_detached": bool(info["target_detached"]),
-    }

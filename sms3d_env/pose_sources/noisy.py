@@ -1,35 +1,18 @@
-"""Pose sources: where the target mushroom's *estimated* pose in the observation comes from.
+"""The ``"oracle"`` and ``"noisy"`` pose sources: the truth, and the truth with an exact error.
 
-A pose source is any callable ``(scene, instance_id, rng) -> PoseEstimate``. It is called once per
-episode at reset (a scan before the pick). ``"oracle"`` returns the truth; ``"noisy"`` rotates it
-by exactly ``pose_error_deg`` about a random axis perpendicular to the stem (and optionally adds
-Gaussian position noise); a perception pipeline plugs in as another callable.
+``OraclePose`` returns the scene's pose; ``NoisyPose`` rotates it by exactly ``pose_error_deg``
+about a random axis perpendicular to the stem (and optionally adds Gaussian position noise or an
+exact cap-top offset); ``UniformNoisyPose`` draws that error per episode.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from generator.geometry import axis_angle_matrix
-
-
-@dataclass(frozen=True)
-class PoseEstimate:
-    """Estimated target pose: cap-top centre (m, world) and rotation (stem axis = column 2)."""
-
-    cap_top: np.ndarray
-    rotation: np.ndarray
-
-    @property
-    def stem_axis(self) -> np.ndarray:
-        return self.rotation[:, 2].copy()
-
-
-class PoseSource(Protocol):
-    def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate: ...
+from sms3d_env.pose_sources.base import PoseEstimate
 
 
 class OraclePose:
@@ -92,20 +75,3 @@ class UniformNoisyPose:
 
     def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:
         return NoisyPose(rng.uniform(self.low_deg, self.high_deg))(scene, instance_id, rng)
-
-
-def make_pose_source(kind: str | PoseSource, pose_error_deg: float = 0.0,
-                     position_std: float = 0.0) -> PoseSource:
-    """``"oracle"``, ``"noisy"``, ``"perception"`` (the two-stage pipeline with the shipped pose
-    network, see ``perception_source.py``) or any callable pose source."""
-    if callable(kind):
-        return kind
-    if kind == "oracle":
-        return OraclePose()
-    if kind == "noisy":
-        return NoisyPose(pose_error_deg, position_std)
-    if kind == "perception":
-        from sms3d_env.perception_source import PerceptionPose
-
-        return PerceptionPose()
-    raise ValueError(f"pose_source must be 'oracle', 'noisy', 'perception' or a callable, got {kind!r}")

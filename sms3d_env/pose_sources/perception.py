@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from sms3d_env.pose_source import PoseEstimate
+from sms3d_env.pose_sources.base import PoseEstimate
 
 MIN_TARGET_IOU = 0.5
 

@@ -278,9 +278,9 @@ def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str =
     """CSV (every row), PNG and Markdown summary into ``out``; returns their paths. The curve
     and its summary are those of ``base_slice``; a sweep over position errors adds the success
     map (``sweep_map.png``), one over tools or bed sizes their slices (``sweep_slices.png``), and
-    the summary states the tolerance region (:mod:`sms3d_env.study_map`). Each file is replaced
+    the summary states the tolerance region (:mod:`sms3d_env.study.success_map`). Each file is replaced
     atomically; if any of them fails, none is left (see below)."""
-    from sms3d_env import study_map
+    from sms3d_env.study import success_map
 
     out = Path(out)
     tool, size, position = base_slice(rows)
@@ -293,13 +293,13 @@ def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str =
         plot_sweep(base, paths["png"], perception)
         text = summarise(base, command, perception)
         if len({axes(r)[2] for r in rows if axes(r)[:2] == (tool, size)}) > 1:
-            study_map.plot_map([r for r in rows if axes(r)[:2] == (tool, size)], paths["map"])
-            text += study_map.region_summary([r for r in rows if axes(r)[:2] == (tool, size)])
+            success_map.plot_map([r for r in rows if axes(r)[:2] == (tool, size)], paths["map"])
+            text += success_map.region_summary([r for r in rows if axes(r)[:2] == (tool, size)])
         else:
             paths["map"].unlink(missing_ok=True)
         if len({axes(r)[:2] for r in rows}) > 1:
-            study_map.plot_slices(rows, paths["slices"])
-            text += study_map.slices_summary(rows)
+            success_map.plot_slices(rows, paths["slices"])
+            text += success_map.slices_summary(rows)
         else:
             paths["slices"].unlink(missing_ok=True)
         write_atomic(paths["md"], text)

@@ -1,7 +1,7 @@
 """The accuracy answer in two dimensions: success over (orientation error x cap-top position
 error), the tolerance region, and the 1-D slices per tool and bed size.
 
-Rows are the sweep's (``accuracy_study.run_task``); every function reads the default physics
+Rows are the sweep's (``sweep.run_task``); every function reads the default physics
 unless told a variant, and only reachable targets of the noisy source (the perception source's
 rows are drawn as a cloud of measured errors).
 """
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from sms3d_env.study_report import (
+from sms3d_env.study.report import (
     TILTED_DEG,
     WITHIN_PP,
     axes,

@@ -26,7 +26,7 @@ from generator.dataset.errors import CorruptFileError
 from generator.errors import ConfigError
 from generator.files import write_atomic
 from sms3d_env.physics_params import PickPhysicsParams
-from sms3d_env.study_report import write_report
+from sms3d_env.study.report import write_report
 
 DEFAULT_ERRORS_DEG = (0.0, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0)
 # Physics settings with no published source, varied to show how the answer depends on them:
@@ -58,7 +58,7 @@ class SweepConfig:
     perception_detector: str = "shipped"  # stage 1 of the perception episodes: "shipped", "oracle" or a path
     chunk: int = 10  # episodes per task (one part file)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
-    picker: str = "scripted"  # "scripted", "policy[:PATH]" or "residual:PATH" (sms3d_env.pickers)
+    picker: str = "scripted"  # "scripted", "policy[:PATH]" or "residual:PATH" (sms3d_env.pickers.registry)
 
     def __post_init__(self) -> None:
         """Raise :class:`~generator.errors.ConfigError` naming the field. Everything is checked
@@ -91,7 +91,7 @@ class SweepConfig:
             raise ConfigError("variants", f"unknown physics variants {unknown}; choose from {sorted(SENSITIVITY_VARIANTS)}")
         for n in sizes:
             SceneConfig().replace(placement__num_mushrooms=n)  # the generator's own range
-        from sms3d_env.pickers import parse_picker
+        from sms3d_env.pickers.registry import parse_picker
 
         try:
             parse_picker(self.picker)
@@ -147,13 +147,13 @@ def target_features(scene: Any, target: int) -> dict[str, float]:
 def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     """Run one task's episodes in this process and return one row per episode."""
     from generator import SceneConfig
-    from sms3d_env.pickers import make_picker_env, parse_picker
-    from sms3d_env.pose_source import NoisyPose
-    from sms3d_env.scripted_picker import run_episode
+    from sms3d_env.pickers.episode import run_episode
+    from sms3d_env.pickers.registry import make_picker_env, parse_picker
+    from sms3d_env.pose_sources.noisy import NoisyPose
 
     physics = PickPhysicsParams(**SENSITIVITY_VARIANTS[task.variant])
     if task.source == "perception":
-        from sms3d_env.perception_source import PerceptionPose
+        from sms3d_env.pose_sources.perception import PerceptionPose
 
         source: Any = PerceptionPose(detector=config.perception_detector)
     else:
@@ -211,8 +211,8 @@ def _picker_digest(config: SweepConfig) -> str | None:
     """SHA-256 (16 hex digits) of a learned picker's model, None for the scripted picker."""
     import hashlib
 
-    from sms3d_env.pickers import parse_picker
-    from sms3d_env.training import SHIPPED_POLICY
+    from sms3d_env.pickers.registry import parse_picker
+    from sms3d_env.training.actor import SHIPPED_POLICY
 
     spec = parse_picker(config.picker)
     if spec.kind == "scripted":
@@ -354,7 +354,7 @@ def load_rows(folder: str | Path) -> list[dict[str, Any]]:
 def _cmd_compare(args: Any) -> int:
     import sys
 
-    from sms3d_env.study_report import plot_pickers
+    from sms3d_env.study.report import plot_pickers
 
     try:
         curves = {}
@@ -374,7 +374,7 @@ def picker_comparison(curves: dict[str, list[dict[str, Any]]]) -> str:
     """Markdown: each picker's success per orientation error (no position error, default
     physics, reachable targets) and the exact McNemar p against the first picker on the episodes
     both ran (paired by seed)."""
-    from sms3d_env.study_report import axes, base_slice, mcnemar_p, wilson_interval
+    from sms3d_env.study.report import axes, base_slice, mcnemar_p, wilson_interval
 
     def outcomes(rows: list[dict[str, Any]]) -> dict[float, dict[int, bool]]:
         """Per error, seed -> success in the sweep's base slice (first tool and bed size)."""

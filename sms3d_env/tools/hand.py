@@ -1,14 +1,17 @@
-"""The Jaco 3-finger hand in an assembled env model: finger commands, closure, finger contacts.
+"""The Jaco 3-finger hand's rules: finger commands and closure, finger contacts, what it holds.
 
 The hand holds a mushroom by MuJoCo contact friction alone (no weld, no seal model). A mushroom
-counts as *held* while at least ``MIN_FINGERS`` fingers touch it; the env collects the contacts
-after each physics step (``clear``, then ``add`` per contact, then ``held``).
+counts as *held* while at least ``MIN_FINGERS`` fingers touch it with the hand commanded closed;
+the picking model reports each physics step's finger contacts (``on_contact``), then asks what is
+held (``update_hold``). Fingers closing on a cap detach it before they hold it, so the hand has no
+dead end; a detached target that leaves the fingers for a whole control step is a lost grip.
+``add_stem_sockets`` is the hand's part of the world: what holds a detached mushroom up.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -16,13 +19,24 @@ import numpy as np
 from sms3d_env.physics import SOCKET_CONTYPE
 from sms3d_env.robot import FINGER_BODIES, FINGER_JOINTS, PREFIX
 
+if TYPE_CHECKING:
+    from sms3d_env.physics_params import PickPhysicsParams
+    from sms3d_env.picking_model import EpisodeState
+    from sms3d_env.world import World
+
 MIN_FINGERS = 2  # a thumb against one finger already pinches; one finger alone only pushes
 
 
-class HandGrasp:
-    """Finger joints, actuators and contact bookkeeping of the hand in ``model``."""
+class Hand:
+    """Finger joints, actuators and contact bookkeeping of the hand in one episode's ``world``
+    (``params`` unused: the hand's numbers are the robot's, ``RobotConfig``)."""
 
-    def __init__(self, model: mujoco.MjModel) -> None:
+    name = "hand"
+    checks_every_substep = True
+
+    def __init__(self, world: World, params: PickPhysicsParams | None, state: EpisodeState) -> None:
+        self.world, self.state = world, state
+        model = world.model
         ids = [model.joint(PREFIX + j).id for j in FINGER_JOINTS]
         self.qadr = model.jnt_qposadr[ids]
         self.lo, self.hi = model.jnt_range[ids, 0], model.jnt_range[ids, 1]
@@ -34,27 +48,33 @@ class HandGrasp:
                 self.finger_of_geom[model.geom_bodyid == model.body(PREFIX + name).id] = f
         self.clear()
 
-    def open(self, data: mujoco.MjData) -> None:
+    # ------------------------------------------------------------------ fingers
+    def reset(self) -> None:
         """Fingers fully open, and commanded to stay so."""
+        data = self.world.data
         data.qpos[self.qadr] = self.lo
         data.ctrl[self.act] = self.lo
 
-    def command(self, data: mujoco.MjData, a: float) -> None:
-        """``a`` in [-1, 1]: -1 fully open, +1 fully closed, linear in joint angle between."""
-        data.ctrl[self.act] = self.lo + 0.5 * (a + 1.0) * (self.hi - self.lo)
+    def command(self, a: float) -> bool:
+        """``a`` in [-1, 1]: -1 fully open, +1 fully closed, linear in joint angle between;
+        the hand counts as closed (on) for ``a`` > 0."""
+        self.world.data.ctrl[self.act] = self.lo + 0.5 * (a + 1.0) * (self.hi - self.lo)
+        return a > 0
 
-    def closure(self, data: mujoco.MjData) -> float:
+    def closure(self) -> float:
         """Measured closure, 0 (open) to 1 (closed), mean over the fingers."""
-        return float(np.mean((data.qpos[self.qadr] - self.lo) / (self.hi - self.lo)))
+        return float(np.mean((self.world.data.qpos[self.qadr] - self.lo) / (self.hi - self.lo)))
 
+    # ------------------------------------------------------------------ contacts and hold
     def clear(self) -> None:
         """Forget the contacts of the previous physics step."""
         self.fingers: dict[int, int] = {}  # mushroom -> bit set of touching fingers
         self.force: dict[int, float] = {}  # mushroom -> summed finger normal force (N)
 
-    def add(self, geom: int, mushroom: int, normal_force: float) -> None:
-        """Record a contact between robot ``geom`` and ``mushroom`` (ignored unless a finger)."""
-        f = int(self.finger_of_geom[geom])
+    def on_contact(self, contact: int, geom: int, robot_geom: int, mushroom: int,
+                   normal_force: float) -> None:
+        """Record a contact between ``robot_geom`` and ``mushroom`` (ignored unless a finger)."""
+        f = int(self.finger_of_geom[robot_geom])
         if f >= 0:
             self.fingers[mushroom] = self.fingers.get(mushroom, 0) | (1 << f)
             self.force[mushroom] = self.force.get(mushroom, 0.0) + normal_force
@@ -65,6 +85,36 @@ class HandGrasp:
         if not held:
             return -1
         return prefer if prefer in held else max(held, key=lambda k: self.force[k])
+
+    def update_hold(self) -> None:
+        """What the fingers hold after this physics step (held = at least two fingers on it
+        while the hand is commanded closed), then forget the step's contacts."""
+        ep = self.state
+        ep.grip = self.held(ep.target) if ep.tool_on else -1
+        ep.finger_force = self.force.get(ep.target, 0.0)
+        if ep.target in self.fingers:
+            ep.finger_touch_step = ep.steps
+        if ep.grip == ep.target:
+            ep.ever_gripped_target = True
+            ep.held_detached |= ep.target_detached
+        self.clear()
+
+    def check_hold(self) -> None:
+        pass  # friction holds or slips in MuJoCo's contacts
+
+    # ------------------------------------------------------------------ episode
+    def after_step(self) -> None:
+        ep = self.state
+        if ep.held_detached and ep.finger_touch_step < ep.steps:
+            ep.grip_lost = True  # the detached target left the fingers for a whole step
+
+    def dead_end(self) -> bool:
+        return False  # the fingers detach a cap as they close, before they hold it
+
+    def observation(self) -> tuple[float, float, float]:
+        """(closure 0-1, holding with >= 2 fingers, finger force on the target N)."""
+        ep = self.state
+        return self.closure(), float(ep.grip >= 0), ep.finger_force
 
 
 def add_stem_sockets(spec: mujoco.MjSpec, scene: Any, ids: Iterable[int], drop: float = 0.001) -> None:

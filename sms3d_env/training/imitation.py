@@ -135,7 +135,7 @@ def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
     from tqdm import tqdm
 
     import sms3d_env  # noqa: F401  (registers the env ids)
-    from sms3d_env.scripted_picker import ScriptedPicker
+    from sms3d_env.pickers.scripted import ScriptedPicker
 
     envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg)) for n in cfg.num_mushrooms]
     rng = np.random.default_rng([cfg.seed, seeds.start])
@@ -229,7 +229,7 @@ def build_policy_model(env: Any, demos: dict[str, np.ndarray], net_arch: tuple[i
     """A PPO model whose policy standardises observations with the demonstrations' statistics."""
     from stable_baselines3 import PPO
 
-    from sms3d_env.policy_features import NormalizedFlatten
+    from sms3d_env.training.policy_features import NormalizedFlatten
 
     keys = list(env.observation_space.spaces)
     x = flat_observations(demos, keys)

@@ -45,7 +45,7 @@ def plot_curves(runs: dict[str, list[dict[str, float]]], path: str | Path) -> No
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sms3d_env.study_report import save_figure
+    from sms3d_env.study.report import save_figure
 
     fig, (by_steps, by_wall) = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for label, points in runs.items():

@@ -30,7 +30,7 @@ class ResidualPicker(gym.Wrapper):
         super().__init__(env)
         if not (isinstance(scale, (int, float)) and np.isfinite(scale) and 0 < scale <= 2):
             raise ValueError(f"residual scale must be in (0, 2], got {scale!r}")
-        from sms3d_env.scripted_picker import ScriptedPicker
+        from sms3d_env.pickers.scripted import ScriptedPicker
 
         self.scale = float(scale)
         self.picker = ScriptedPicker.for_env(env)

@@ -1,0 +1,163 @@
+"""The suction tool's rules: the valve, the seal, the grip weld and its loss.
+
+| rule | where | numbers |
+| --- | --- | --- |
+| valve: on while the command is > 0; latched (training option): held once sealed | ``Suction.command`` | |
+| seal: cup on a cap top, within the seal angle, pressed with the seal force, suction on | ``on_contact`` / ``seals`` | ``PickPhysicsParams.seal_angle_deg``, ``seal_region``, ``seal_force`` |
+| grip: the seal is a weld anchored at the contact; released when the valve closes | ``grip`` / ``release`` | |
+| grip loss: the seal's load against its capacity | ``check_hold`` / ``grip_wrench`` | ``physics.grip_utilisation`` (vacuum x cup area, friction) |
+| dead ends: the target knocked off its roots and not held, or a latched seal on a neighbour | ``dead_end`` | |
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+
+from sms3d_env import physics as ph
+from sms3d_env.physics_params import PickPhysicsParams
+
+if TYPE_CHECKING:
+    from sms3d_env.picking_model import EpisodeState
+    from sms3d_env.world import World
+
+_EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+
+
+class Suction:
+    """The suction cup of one episode on ``world`` (its grip welds and cup ids).
+
+    Args:
+        world, params, state: the episode's world, picking numbers and state.
+        latched: the vacuum valve holds its state: once a seal forms it stays on whatever the
+            command (``suction_mode="latched"``), as a picker's valve does after its vacuum
+            switch trips.
+    """
+
+    name = "suction"
+    checks_every_substep = False
+
+    def __init__(self, world: World, params: PickPhysicsParams, state: EpisodeState,
+                 latched: bool = False) -> None:
+        self.world, self.params, self.state, self.latched = world, params, state, latched
+        self._qfrc = np.zeros(world.model.nv)
+
+    def reset(self) -> None:
+        pass
+
+    def command(self, a: float) -> bool:
+        """Suction on if ``a`` > 0 (latched: also while a seal holds); off releases the seal."""
+        ep = self.state
+        on = a > 0 or (self.latched and ep.grip >= 0)
+        if not on and ep.grip >= 0:
+            self.release()
+        return on
+
+    # ------------------------------------------------------------------ seal
+    def on_contact(self, contact: int, geom: int, robot_geom: int, mushroom: int,
+                   normal_force: float) -> None:
+        """The seal test on a cup-cap contact while suction is on and nothing is held."""
+        w, ep, p = self.world, self.state, self.params
+        if (robot_geom == w.cup_geom and w.is_cap[geom] and ep.tool_on
+                and ep.grip < 0 and normal_force >= p.seal_force and w.grip_eq[mushroom] >= 0):
+            d = w.data
+            normal = d.contact.frame[contact][:3] * (1.0 if d.contact.geom[contact][0] == w.cup_geom else -1.0)
+            if self.seals(mushroom, d.contact.pos[contact], normal):
+                self.grip(mushroom, d.contact.pos[contact].copy())
+
+    def seals(self, k: int, point: np.ndarray, normal_cup_to_cap: np.ndarray) -> bool:
+        """Seal test: cup axis vs. cap normal at the contact, and contact on the cap top."""
+        w, p = self.world, self.params
+        d = w.data
+        z = d.site_xmat[w.tool_site].reshape(3, 3)[:, 2]
+        cos = float(z @ normal_cup_to_cap)
+        if cos < np.cos(np.deg2rad(p.seal_angle_deg)):
+            return False
+        b = w.body_ids[k]
+        axis = d.xmat[b].reshape(3, 3)[:, 2]
+        rel = point - d.xpos[b]
+        radial = np.linalg.norm(rel - (rel @ axis) * axis)
+        return bool(radial <= p.seal_region * w.cap_radius[k])
+
+    def grip(self, k: int, point: np.ndarray | None = None) -> None:
+        """Seal the cup on mushroom ``k``: a weld anchored at the contact ``point`` (world;
+        default the tool site)."""
+        w, ep = self.world, self.state
+        m, d = w.model, w.data
+        e, b = w.grip_eq[k], w.body_ids[k]
+        point = np.asarray(d.site_xpos[w.tool_site] if point is None else point, float)
+        # Anchor (body2 = mushroom frame) at the cup-cap contact: the weld is the seal itself.
+        # MuJoCo's weld joins the point eq_data[:3] in body2's frame to the point eq_data[3:6] in
+        # body1's (the cup's) frame: both are the contact point now; eq_data[6:10] is the
+        # relative orientation.
+        m.eq_data[e, :3] = d.xmat[b].reshape(3, 3).T @ (point - d.xpos[b])
+        m.eq_data[e, 3:10] = ph.weld_relpose(m, d, w.cup_body, b)
+        m.eq_data[e, 3:6] = d.xmat[w.cup_body].reshape(3, 3).T @ (point - d.xpos[w.cup_body])
+        m.eq_data[e, 10] = 1.0
+        d.eq_active[e] = 1
+        # While sealed, the weld is the cup-cap interface: the cup face stops colliding with
+        # mushrooms (otherwise contact and weld fight and load the seal with internal forces).
+        m.geom_conaffinity[w.cup_geom] = 0
+        m.geom_contype[w.cup_geom] = ph.SOIL_CONAFFINITY
+        ep.grip = k
+        ep.seal_step, ep.seal_tool_x = ep.steps, d.site_xmat[w.tool_site, 0::3].copy()
+        if k == ep.target:
+            ep.ever_gripped_target = True
+
+    def release(self) -> None:
+        w, ep = self.world, self.state
+        w.data.eq_active[w.grip_eq[ep.grip]] = 0
+        w.model.geom_contype[w.cup_geom], w.model.geom_conaffinity[w.cup_geom] = w.cup_mask
+        ep.grip, ep.grip_util, ep.seal_step, ep.seal_tool_x = -1, 0.0, -1, None
+
+    def update_hold(self) -> None:
+        pass  # the seal forms in ``on_contact``
+
+    # ------------------------------------------------------------------ grip loss
+    def grip_wrench(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Load the seal carries: world force the cup exerts on the gripped mushroom, its moment
+        about the cup contact point (the tool site on the cup face), and the cup axis."""
+        w, k = self.world, self.state.grip
+        d = w.data
+        nefc = d.nefc
+        rows = (d.efc_type[:nefc] == _EQ) & (d.efc_id[:nefc] == w.grip_eq[k])  # eq ids only
+        q = ph.wrench_from_rows(w.model, d, rows, self._qfrc)
+        b = w.body_ids[k]
+        force, torque = ph.free_body_wrench(q, w.dofadr[k], d.xmat[b].reshape(3, 3))
+        moment = ph.moment_about(force, torque, d.xpos[b], d.site_xpos[w.tool_site])
+        return force, moment, d.site_xmat[w.tool_site].reshape(3, 3)[:, 2].copy()
+
+    def check_hold(self) -> None:
+        """The seal lets go when its load reaches its capacity (the detached target's grip is
+        then lost)."""
+        ep = self.state
+        k = ep.grip
+        if k < 0:
+            return
+        force, torque_c, z = self.grip_wrench()
+        fz, shear = ph.axial_split(force, z)
+        tz, bend = ph.axial_split(torque_c, z)
+        u = ph.grip_utilisation(max(0.0, -fz), shear, bend, abs(tz), self.params)
+        ep.grip_util = u
+        if u >= 1.0:
+            if k == ep.target and ep.target_detached:
+                ep.grip_lost = True
+            self.release()
+
+    # ------------------------------------------------------------------ episode
+    def after_step(self) -> None:
+        pass
+
+    def dead_end(self) -> bool:
+        """The target is off its roots and not held, or a latched seal holds another mushroom."""
+        ep = self.state
+        knocked_off = ep.target_detached and ep.grip != ep.target
+        wrong_seal = self.latched and ep.grip >= 0 and ep.grip != ep.target
+        return knocked_off or wrong_seal
+
+    def observation(self) -> tuple[float, float, float]:
+        """(suction on, sealed, seal load / capacity)."""
+        ep = self.state
+        return float(ep.tool_on), float(ep.grip >= 0), ep.grip_util

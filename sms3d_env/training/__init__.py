@@ -1,0 +1,34 @@
+"""Learned pick policies with stable-baselines3.
+
+| concept | module |
+| --- | --- |
+| ``TrainConfig`` (RL settings, saved as ``config.json``), ``env_kwargs`` | :mod:`~sms3d_env.training.config` |
+| the training envs (``make_env``, ``vec_env``, ``normalized``) | :mod:`~sms3d_env.training.envs` |
+| PPO/SAC training (``train_policy``) | :mod:`~sms3d_env.training.rl` |
+| behaviour cloning + DAgger of the scripted picker (``BCConfig``, ``train_bc``) | :mod:`~sms3d_env.training.imitation` |
+| residual policies on top of the scripted picker (``ResidualPicker``) | :mod:`~sms3d_env.training.residual` |
+| the shipped policies' features extractor (``NormalizedFlatten``) | :mod:`~sms3d_env.training.policy_features` |
+| a saved policy as a picker (``load_model``, ``PolicyActor``, ``SHIPPED_POLICY``) | :mod:`~sms3d_env.training.actor` |
+| success of a saved policy (``evaluate_policy_success``) | :mod:`~sms3d_env.training.evaluation` |
+| learning curves of runs (``read_curve``, ``sms3d learning-curve``) | :mod:`~sms3d_env.training.learning_curve` |
+| ``sms3d train-policy`` / ``eval-policy`` (``register``, ``main``; ``python -m sms3d_env.training``) | :mod:`~sms3d_env.training.cli` |
+
+The names load their module on first access (``sms3d --help`` pays for none of SB3 or torch).
+"""
+
+from generator.lazy import lazy_exports
+
+_EXPORTS = {
+    "ALGOS": "config", "ENV_IDS": "config", "POSE_SOURCES": "config", "RECIPES": "config",
+    "REWARD_TYPES": "config", "TrainConfig": "config", "env_kwargs": "config",
+    "make_env": "envs", "train_policy": "rl",
+    "BCConfig": "imitation", "train_bc": "imitation", "ResidualPicker": "residual",
+    "NormalizedFlatten": "policy_features",
+    "SHIPPED_POLICY": "actor", "VECNORM_FILE": "actor", "PolicyActor": "actor", "load_model": "actor",
+    "evaluate_policy_success": "evaluation", "success_line": "evaluation",
+    "read_curve": "learning_curve", "register": "cli", "main": "cli",
+}  # fmt: skip
+
+__all__ = sorted(_EXPORTS)
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -1,0 +1,149 @@
+"""``sms3d train-policy``, ``sms3d eval-policy`` and ``sms3d learning-curve`` (also
+``python -m sms3d_env.training ...``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from sms3d_env.training.config import (
+    ALGOS,
+    ENV_IDS,
+    POSE_SOURCES,
+    RECIPES,
+    REWARD_TYPES,
+    TrainConfig,
+)
+from sms3d_env.training.evaluation import evaluate_policy_success, success_line
+from sms3d_env.training.rl import train_policy
+
+
+def _cmd_train(args: Any) -> int:
+    if args.recipe == "bc":
+        return _cmd_train_bc(args)
+    noisy = args.pose_error_deg > 0 or args.pose_error_range is not None
+    pose_source = args.pose_source or ("noisy" if noisy else "oracle")
+    residual = args.recipe == "residual"
+    try:
+        cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v0" if residual else args.env_id,
+                          normalize=args.normalize or residual, scene_pool=args.scene_pool,
+                          residual_scale=args.residual_scale if residual else 0.0,
+                          pose_error_range_deg=args.pose_error_range,
+                          log_std_init=args.log_std_init if args.log_std_init is not None
+                          else (-1.6 if residual else 0.0),
+                          total_steps=args.steps, max_wall_s=args.max_wall_s,
+                          n_envs=args.n_envs, pose_source=pose_source, pose_error_deg=args.pose_error_deg,
+                          reward_type=args.reward_type, num_mushrooms=args.num_mushrooms, seed=args.seed,
+                          out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
+                          checkpoint_freq=args.checkpoint_freq)
+    except ValueError as e:
+        print(f"error: {e}")
+        return 2
+    summary = train_policy(cfg)
+    print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _cmd_train_bc(args: Any) -> int:
+    from sms3d_env.training.imitation import BCConfig, train_bc
+
+    try:
+        cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
+                       pose_error_deg=args.pose_error_deg, seed=args.seed, out=args.out,
+                       num_mushrooms=tuple(args.demo_mushrooms), dagger_rounds=args.dagger_rounds,
+                       dagger_episodes=args.dagger_episodes)
+    except ValueError as e:
+        print(f"error: {e}")
+        return 2
+    print(json.dumps(train_bc(cfg), indent=2))
+    return 0
+
+
+def _cmd_eval(args: Any) -> int:
+    try:
+        res = evaluate_policy_success(args.model, episodes=args.episodes, pose_error_deg=args.pose_error_deg,
+                                      seed=args.seed, num_mushrooms=args.num_mushrooms, progress=True)
+    except (ValueError, FileNotFoundError) as e:
+        print(f"error: {e}")
+        return 2
+    text = json.dumps({k: v for k, v in res.items() if k != "per_episode"}, indent=2)
+    print(text)
+    print(success_line(res))
+    if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(res, indent=2))
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``sms3d train-policy``, ``sms3d eval-policy`` and ``sms3d learning-curve``."""
+    defaults = TrainConfig()
+    p = subparsers.add_parser(
+        "train-policy", help="train a pick policy: RL (PPO/SAC, stable-baselines3) or behaviour "
+                             "cloning of the scripted picker (--recipe bc)")
+    p.add_argument("--recipe", choices=RECIPES, default="rl",
+                   help="rl: PPO/SAC from scratch (default); bc: scripted demonstrations -> "
+                        "behaviour cloning on SMS3DPickTrain-v0 (sms3d_env.training.imitation); residual: "
+                        "PPO/SAC on top of the scripted picker on SMS3DPickTrain-v0 (sms3d_env.training.residual)")
+    p.add_argument("--algo", choices=ALGOS, default=defaults.algo)
+    p.add_argument("--env-id", choices=ENV_IDS, default=defaults.env_id,
+                   help="SMS3DPickTrain-v0: the learnable options (latched suction, staged reward, ...)")
+    p.add_argument("--normalize", action="store_true", help="standardise observations (VecNormalize)")
+    p.add_argument("--scene-pool", type=int, default=defaults.scene_pool,
+                   help="draw training beds from a pool of this many (0: a new bed per reset)")
+    p.add_argument("--steps", type=int, default=defaults.total_steps, help="total env steps")
+    p.add_argument("--max-wall-s", type=float, default=None, help="stop after this many seconds")
+    p.add_argument("--n-envs", type=int, default=defaults.n_envs, help="parallel envs (SubprocVecEnv if > 1)")
+    p.add_argument("--pose-source", choices=POSE_SOURCES, default=None,
+                   help="default: noisy if --pose-error-deg > 0, else oracle")
+    p.add_argument("--pose-error-deg", type=float, default=0.0)
+    p.add_argument("--pose-error-range", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                   help="train under a pose error drawn per episode in [LOW, HIGH] degrees")
+    p.add_argument("--residual-scale", type=float, default=0.5,
+                   help="--recipe residual: the residual's largest share of each command")
+    p.add_argument("--log-std-init", type=float, default=None,
+                   help="initial log standard deviation of the policy (default 0; -1.6 for --recipe residual)")
+    p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)
+    p.add_argument("--out", default=defaults.out, help="run folder (model.zip, progress.csv, ...)")
+    p.add_argument("--seed", type=int, default=defaults.seed)
+    p.add_argument("--num-mushrooms", type=int, default=defaults.num_mushrooms)
+    p.add_argument("--eval-episodes", type=int, default=defaults.eval_episodes,
+                   help="episodes per periodic evaluation")
+    p.add_argument("--eval-freq", type=int, default=defaults.eval_freq, help="env steps between evaluations (0: none)")
+    p.add_argument("--checkpoint-freq", type=int, default=defaults.checkpoint_freq,
+                   help="env steps between checkpoints (0: none)")
+    bc = p.add_argument_group("behaviour cloning (--recipe bc)")
+    bc.add_argument("--demo-episodes", type=int, default=400, help="scripted episodes (failures dropped)")
+    bc.add_argument("--demo-mushrooms", type=int, nargs="+", default=[10, 25], help="bed sizes cycled through")
+    bc.add_argument("--action-noise", type=float, default=0.2, help="DART noise on the twist while collecting")
+    bc.add_argument("--epochs", type=int, default=40, help="epochs of the first clone")
+    bc.add_argument("--dagger-rounds", type=int, default=3, help="DAgger rounds after it (0: plain BC)")
+    bc.add_argument("--dagger-episodes", type=int, default=150, help="episodes per DAgger round")
+    p.set_defaults(func=_cmd_train)
+
+    e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "
+                                                  "(default: the shipped one)")
+    e.add_argument("--model", default=None, help="path to model.zip (default: the shipped policy)")
+    e.add_argument("--episodes", "--eval-episodes", dest="episodes", type=int, default=30)
+    e.add_argument("--pose-error-deg", type=float, default=0.0, help="0: oracle poses")
+    e.add_argument("--seed", type=int, default=1_000_000, help="first episode seed")
+    e.add_argument("--num-mushrooms", type=int, default=None,
+                   help="mushrooms per bed (default: the training bed size, else 25)")
+    e.add_argument("--json", default=None, help="also write the result here")
+    e.set_defaults(func=_cmd_eval)
+
+    from sms3d_env.training import learning_curve
+
+    learning_curve.register(subparsers)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sms3d_env.training {train-policy,eval-policy,learning-curve} ...`` (same as ``sms3d ...``)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m sms3d_env.training")
+    register(parser.add_subparsers(dest="cmd", required=True))
+    args = parser.parse_args(argv)
+    return int(args.func(args))
+

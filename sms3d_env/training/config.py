@@ -1,0 +1,174 @@
+"""What a reinforcement-learning run depends on: ``TrainConfig`` (saved as ``config.json`` beside
+the model) and the env arguments it makes (``env_kwargs``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+ALGOS = ("ppo", "sac")
+POSE_SOURCES = ("oracle", "noisy")
+REWARD_TYPES = ("dense", "sparse", "staged")
+ENV_IDS = ("SMS3DPick-v0", "SMS3DPickTrain-v0")
+RECIPES = ("rl", "bc", "residual")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run depends on (saved as ``config.json`` next to the model).
+
+    Args:
+        algo: ``"ppo"`` or ``"sac"``.
+        total_steps: environment steps over all envs.
+        max_wall_s: stop early (after the current step) once this many seconds have passed.
+        n_envs: parallel envs (``SubprocVecEnv`` if > 1, else ``DummyVecEnv``).
+        pose_source, pose_error_deg, position_noise: the target pose estimate used in training.
+        env_id: ``"SMS3DPick-v0"`` (its options as given here) or ``"SMS3DPickTrain-v0"`` (the
+            learnable options: latched suction, staged reward, dead-end episode end, task
+            observations; ``reward_type`` is then ignored and must stay at its default).
+        normalize: standardise observations with running statistics (``VecNormalize``).
+        scene_pool: > 0: each env draws its beds from a pool of this many (the env's
+            ``scene_pool``; resets then cost physics, not placement and compilation).
+        residual_scale: > 0 trains a residual on top of the scripted picker
+            (:class:`sms3d_env.training.residual.ResidualPicker` with this scale); 0: the policy acts alone.
+        pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
+            uniformly in that range (``pose_source`` must then be ``"noisy"`` and
+            ``pose_error_deg`` 0).
+        reward_type: ``"dense"``, ``"sparse"`` or ``"staged"``.
+        num_mushrooms: mushrooms per generated scene.
+        max_episode_steps: episode limit (the registered env uses 250).
+        eval_freq, checkpoint_freq: in total env steps; 0 disables.
+        eval_episodes: episodes per periodic evaluation (oracle poses, same scenes per eval).
+        learning_rate, batch_size, n_steps (PPO, per env), buffer_size and learning_starts (SAC),
+        gamma, net_arch: algorithm hyper-parameters.
+        log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
+            standard deviation of 1 on every normalised command; a residual starts quieter).
+        torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
+            policy's per-step forward pass is tiny, and with the env workers (and anything else)
+            on the same cores, 2 intra-op threads made it ~50x slower here (64 ms vs 1.2 ms).
+    """
+
+    algo: str = "ppo"
+    env_id: str = "SMS3DPick-v0"
+    normalize: bool = False
+    scene_pool: int = 0
+    residual_scale: float = 0.0
+    pose_error_range_deg: tuple[float, float] | None = None
+    total_steps: int = 100_000
+    max_wall_s: float | None = None
+    n_envs: int = 1
+    pose_source: str = "oracle"
+    pose_error_deg: float = 0.0
+    position_noise: float = 0.0
+    reward_type: str = "dense"
+    num_mushrooms: int = 10
+    max_episode_steps: int = 250
+    seed: int = 0
+    out: str = "runs/policy"
+    eval_freq: int = 20_000
+    eval_episodes: int = 10
+    checkpoint_freq: int = 50_000
+    learning_rate: float = 3e-4
+    batch_size: int = 256
+    n_steps: int = 1024
+    buffer_size: int = 100_000
+    learning_starts: int = 1_000
+    gamma: float = 0.99
+    net_arch: tuple[int, ...] = (256, 256)
+    log_std_init: float = 0.0
+    device: str = "cpu"
+    torch_threads: int = 1
+    verbose: int = 1
+
+    def __post_init__(self) -> None:
+        def bad(name: str, why: str) -> ValueError:
+            return ValueError(f"TrainConfig.{name} {why}, got {getattr(self, name)!r}")
+
+        if self.algo not in ALGOS:
+            raise bad("algo", f"must be one of {ALGOS}")
+        if self.pose_source not in POSE_SOURCES:
+            raise bad("pose_source", f"must be one of {POSE_SOURCES}")
+        if self.reward_type not in REWARD_TYPES:
+            raise bad("reward_type", f"must be one of {REWARD_TYPES}")
+        if self.env_id not in ENV_IDS:
+            raise bad("env_id", f"must be one of {ENV_IDS}")
+        if self.env_id == "SMS3DPickTrain-v0" and self.reward_type != "dense":
+            raise bad("reward_type", "is set by SMS3DPickTrain-v0 (staged); leave it at its default")
+        if not isinstance(self.normalize, bool):
+            raise bad("normalize", "must be a bool")
+        if not (isinstance(self.residual_scale, (int, float)) and math.isfinite(self.residual_scale)
+                and 0 <= self.residual_scale <= 2):
+            raise bad("residual_scale", "must be a number in [0, 2]")
+        if self.pose_error_range_deg is not None:
+            rng = tuple(float(v) for v in self.pose_error_range_deg)
+            if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:
+                raise bad("pose_error_range_deg", "must be (low, high) with 0 <= low <= high <= 180")
+            if self.pose_source != "noisy" or self.pose_error_deg:
+                raise bad("pose_error_range_deg", "needs pose_source='noisy' and pose_error_deg=0")
+            object.__setattr__(self, "pose_error_range_deg", rng)
+        for name in ("total_steps", "n_envs", "torch_threads", "num_mushrooms", "max_episode_steps", "eval_episodes",
+                     "batch_size", "n_steps", "buffer_size"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise bad(name, "must be an integer >= 1")
+        for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose", "scene_pool"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise bad(name, "must be an integer >= 0")
+        for name in ("pose_error_deg", "position_noise"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise bad(name, "must be a finite number >= 0")
+        if self.pose_source == "oracle" and (self.pose_error_deg > 0 or self.position_noise > 0):
+            raise bad("pose_error_deg", "must be 0 with pose_source='oracle' (use 'noisy')")
+        if self.max_wall_s is not None and not (math.isfinite(self.max_wall_s) and self.max_wall_s > 0):
+            raise bad("max_wall_s", "must be None or a finite number > 0")
+        if not (isinstance(self.learning_rate, (int, float)) and 0 < self.learning_rate < 1):
+            raise bad("learning_rate", "must be in (0, 1)")
+        if not (0 < self.gamma <= 1):
+            raise bad("gamma", "must be in (0, 1]")
+        if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
+            raise bad("net_arch", "must be a non-empty sequence of positive layer widths")
+        if not (isinstance(self.log_std_init, (int, float)) and math.isfinite(self.log_std_init)):
+            raise bad("log_std_init", "must be a finite number")
+        if not self.out:
+            raise bad("out", "must be a non-empty path")
+        object.__setattr__(self, "net_arch", tuple(int(h) for h in self.net_arch))
+
+    def env_kwargs(self, pose_source: str | None = None, pose_error_deg: float | None = None) -> dict[str, Any]:
+        kw = env_kwargs(self.num_mushrooms, pose_source or self.pose_source,
+                        self.pose_error_deg if pose_error_deg is None else pose_error_deg,
+                        self.position_noise, self.reward_type, self.max_episode_steps)
+        if self.env_id != "SMS3DPick-v0":
+            kw.pop("reward_type")  # the training id sets its own
+        if self.pose_error_range_deg is not None and pose_error_deg is None:
+            from sms3d_env.pose_sources import UniformNoisyPose
+
+            kw.pop("pose_error_deg")
+            kw["pose_source"] = UniformNoisyPose(*self.pose_error_range_deg)
+        if self.scene_pool:
+            kw["scene_pool"] = self.scene_pool
+        return {"env_id": self.env_id, "residual_scale": self.residual_scale, **kw}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        known = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in d.items() if k in known}
+        if "net_arch" in kw:
+            kw["net_arch"] = tuple(kw["net_arch"])
+        return cls(**kw)
+
+
+def env_kwargs(num_mushrooms: int, pose_source: str, pose_error_deg: float, position_noise: float = 0.0,
+               reward_type: str = "dense", max_episode_steps: int = 250) -> dict[str, Any]:
+    import generator
+
+    kw = {
+        "scene_config": generator.SceneConfig().replace(placement__num_mushrooms=int(num_mushrooms)),
+        "pose_source": pose_source, "reward_type": reward_type,
+        "max_episode_steps": int(max_episode_steps),
+    }
+    if pose_source == "noisy":  # the env refuses pose errors it would ignore
+        kw.update(pose_error_deg=float(pose_error_deg), position_noise=float(position_noise))
+    return kw

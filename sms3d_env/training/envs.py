@@ -1,0 +1,40 @@
+"""The training envs: one pick env (``make_env``, optionally inside a ``ResidualPicker``),
+vectorised (``vec_env``) and with standardised observations (``normalized``)."""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+
+def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, **kwargs: Any) -> Any:
+    """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``
+    > 0 wraps the env in a ``ResidualPicker``."""
+    import gymnasium as gym
+
+    import sms3d_env  # noqa: F401  (registers the env ids)
+
+    env = gym.make(env_id, **kwargs)
+    if residual_scale > 0:
+        from sms3d_env.training.residual import ResidualPicker
+
+        env = ResidualPicker(env, residual_scale)
+    return env
+
+
+def vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | None) -> Any:
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    return make_vec_env(functools.partial(make_env, **kwargs), n_envs=n_envs, seed=seed,
+                        monitor_dir=monitor_dir,
+                        vec_env_cls=SubprocVecEnv if n_envs > 1 else DummyVecEnv,
+                        monitor_kwargs={"info_keywords": ("is_success", "failure_cause")})
+
+
+def normalized(env: Any, training: bool) -> Any:
+    """Observations standardised by running statistics (rewards as they are: the staged reward
+    is bounded already, and evaluation reports true returns)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    return VecNormalize(env, norm_obs=True, norm_reward=False, training=training)

@@ -1,0 +1,106 @@
+"""``evaluate_policy_success``: a saved model (by default the shipped policy, ``SHIPPED_POLICY``)
+over seeded episodes under the env id and options it was trained with: the success rate with a
+95 % Wilson interval and the failure causes."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sms3d_env.training.actor import SHIPPED_POLICY, PolicyActor
+from sms3d_env.training.config import env_kwargs
+from sms3d_env.training.envs import make_env
+
+
+def evaluate_policy_success(model_path: str | Path | None = None, episodes: int = 30,
+                            pose_error_deg: float = 0.0, seed: int = 0,
+                            num_mushrooms: int | None = None,
+                            max_episode_steps: int | None = None, algo: str | None = None,
+                            deterministic: bool = True, progress: bool = False) -> dict[str, Any]:
+    """Success of a saved policy over seeded episodes with oracle (0 deg) or noisy target poses.
+
+    ``model_path`` None: the shipped policy. The env is the id and options the policy was trained
+    with (``config.json`` beside the model) on ``num_mushrooms``-mushroom beds (default: the
+    single bed size it was trained on, else 25, the registered env's — so the shipped policy,
+    trained on 10 and 25, is evaluated on 25). Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for
+    every model and pose error.
+
+    Returns ``{"episodes", "successes", "success_rate", "ci95": (lo, hi), "reachable",
+    "success_rate_reachable", "failure_causes": {cause: count}, "target_detached_at_end",
+    "target_held_at_end" (episode counts), "mean_return", "mean_steps", "per_episode" (success
+    per episode), "env_id", "env_options", "num_mushrooms", "pose_error_deg", "seed", "model"}``.
+    """
+    from tqdm import tqdm
+
+    from sms3d_env.study.report import wilson_interval
+
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise ValueError(f"episodes must be an integer >= 1, got {episodes!r}")
+    if not (math.isfinite(pose_error_deg) and pose_error_deg >= 0):
+        raise ValueError(f"pose_error_deg must be a finite number >= 0, got {pose_error_deg!r}")
+    if num_mushrooms is not None and (isinstance(num_mushrooms, bool) or not isinstance(num_mushrooms, int)
+                                      or num_mushrooms < 1):
+        raise ValueError(f"num_mushrooms must be an integer >= 1, got {num_mushrooms!r}")
+    actor = PolicyActor(SHIPPED_POLICY if model_path is None else model_path, algo, deterministic)
+    trained_on = actor.saved.get("num_mushrooms")
+    num_mushrooms = num_mushrooms or (trained_on if isinstance(trained_on, int) else 25)
+    kw = env_kwargs(num_mushrooms, "noisy" if pose_error_deg > 0 else "oracle", pose_error_deg,
+                    0.0, actor.saved.get("reward_type", "dense"),
+                    max_episode_steps or actor.saved.get("max_episode_steps", 250))
+    if actor.env_id != "SMS3DPick-v0":
+        kw.pop("reward_type")
+    kw.update(actor.env_options)
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # per-step inference of a small MLP: more threads only add overhead
+    env = make_env(actor.env_id, actor.residual_scale, **kw)
+    causes: Counter[str] = Counter()
+    successes = reachable = reach_succ = detached = held = 0
+    returns, lengths, per_episode = [], [], []
+    try:
+        for i in tqdm(range(episodes), desc="eval-policy", disable=not progress, unit="ep"):
+            obs, info = env.reset(seed=seed + i)
+            done, total, steps = False, 0.0, 0
+            while not done:
+                obs, reward, terminated, truncated, info = env.step(actor(obs))
+                total += float(reward)
+                steps += 1
+                done = terminated or truncated
+            ok = bool(info["is_success"])
+            successes += ok
+            per_episode.append(ok)
+            reachable += bool(info["reachable"])
+            reach_succ += ok and bool(info["reachable"])
+            detached += bool(info["target_detached"])
+            held += bool(info["gripped_target"])
+            if not ok:
+                causes[str(info["failure_cause"])] += 1
+            returns.append(total)
+            lengths.append(steps)
+    finally:
+        env.close()
+        torch.set_num_threads(threads)
+    lo, hi = wilson_interval(successes, episodes)
+    return {
+        "model": str(actor.path), "episodes": episodes, "successes": successes,
+        "success_rate": successes / episodes, "ci95": (lo, hi), "reachable": reachable,
+        "success_rate_reachable": reach_succ / reachable if reachable else math.nan,
+        "failure_causes": dict(sorted(causes.items())),
+        "target_detached_at_end": detached, "target_held_at_end": held, "mean_return": float(np.mean(returns)),
+        "mean_steps": float(np.mean(lengths)), "per_episode": per_episode, "env_id": actor.env_id,
+        "env_options": actor.env_options, "num_mushrooms": num_mushrooms,
+        "pose_error_deg": float(pose_error_deg), "seed": seed,
+    }
+
+
+def success_line(res: dict[str, Any]) -> str:
+    """``success K/N (P %, 95 % CI lo-hi %); failures: cause n, ...`` of an evaluation result."""
+    lo, hi = res["ci95"]
+    causes = ", ".join(f"{c} {n}" for c, n in res["failure_causes"].items()) or "none"
+    return (f"success {res['successes']}/{res['episodes']} ({100 * res['success_rate']:.1f} %, "
+            f"95 % CI {100 * lo:.1f}-{100 * hi:.1f} %); failures: {causes}")

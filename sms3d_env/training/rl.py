@@ -1,0 +1,138 @@
+"""Pick policies trained with stable-baselines3 (PPO or SAC) on ``SMS3DPick-v0`` or on the
+learnable options of ``SMS3DPickTrain-v0``.
+
+``train_policy(TrainConfig(...))`` trains with vectorised envs (``SubprocVecEnv`` for
+``n_envs > 1``), evaluates periodically (``eval/success_rate`` from the env's ``is_success``),
+writes CSV (and TensorBoard, if installed) logs, checkpoints and ``model.zip`` plus
+``config.json`` and ``summary.json`` into ``out``; ``normalize=True`` standardises observations
+(SB3's ``VecNormalize``, saved as ``vecnormalize.pkl`` beside the model). The demonstration-started
+recipe lives in :mod:`sms3d_env.training.imitation`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import warnings
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from sms3d_env.training.actor import VECNORM_FILE
+from sms3d_env.training.config import TrainConfig
+from sms3d_env.training.envs import normalized, vec_env
+
+
+def _tensorboard_available() -> bool:
+    try:
+        import tensorboard  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _build_model(cfg: TrainConfig, env: Any) -> Any:
+    from stable_baselines3 import PPO, SAC
+
+    policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": float(cfg.log_std_init)}
+    if cfg.algo == "ppo":
+        n_steps = cfg.n_steps
+        batch = min(cfg.batch_size, n_steps * cfg.n_envs)
+        return PPO("MultiInputPolicy", env, learning_rate=cfg.learning_rate, n_steps=n_steps,
+                   batch_size=batch, gamma=cfg.gamma, policy_kwargs=policy_kwargs, seed=cfg.seed,
+                   device=cfg.device, verbose=cfg.verbose)
+    return SAC("MultiInputPolicy", env, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
+               learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
+               policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
+
+
+def _wall_clock_callback(max_wall_s: float) -> Any:
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _StopAfter(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.t0 = time.perf_counter()
+
+        def _on_step(self) -> bool:
+            return time.perf_counter() - self.t0 < max_wall_s
+
+    return _StopAfter()
+
+
+def train_policy(cfg: TrainConfig) -> dict[str, Any]:
+    """Train, log and save a policy; returns a summary (also written to ``out/summary.json``).
+
+    Files in ``cfg.out``: ``model.zip`` (final), ``config.json``, ``summary.json``,
+    ``progress.csv`` (SB3 logger; ``eval/success_rate`` rows after each evaluation),
+    TensorBoard events if ``tensorboard`` is installed, ``checkpoints/``, ``best/best_model.zip``,
+    ``eval/evaluations.npz`` and ``monitor/`` (per-episode return, length, is_success).
+    """
+    import torch
+
+    # A SubprocVecEnv for training and a DummyVecEnv for evaluation is intended here.
+    warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(cfg.torch_threads)
+    try:
+        return _train(cfg)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _train(cfg: TrainConfig) -> dict[str, Any]:
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.logger import configure
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.json").write_text(json.dumps(asdict(cfg), indent=2))
+    env = vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"))
+    if cfg.normalize:
+        env = normalized(env, training=True)
+    eval_env = None
+    try:
+        model = _build_model(cfg, env)
+        formats = ["stdout", "csv"] + (["tensorboard"] if _tensorboard_available() else [])
+        if not cfg.verbose:
+            formats.remove("stdout")
+        model.set_logger(configure(str(out), formats))
+        callbacks: list[Any] = []
+        if cfg.eval_freq > 0:
+            # Periodic evaluation under the training pose condition (fixed seeds).
+            # Fresh beds, not the training pool's.
+            eval_kw = {k: v for k, v in cfg.env_kwargs().items() if k != "scene_pool"}
+            eval_env = vec_env(eval_kw, 1, cfg.seed + 10_000, None)
+            if cfg.normalize:
+                # EvalCallback copies the training statistics into it before each evaluation.
+                eval_env = normalized(eval_env, training=False)
+            callbacks.append(EvalCallback(
+                eval_env, n_eval_episodes=cfg.eval_episodes, eval_freq=max(cfg.eval_freq // cfg.n_envs, 1),
+                log_path=str(out / "eval"), best_model_save_path=str(out / "best"),
+                deterministic=True, verbose=cfg.verbose, warn=False))
+        if cfg.checkpoint_freq > 0:
+            callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),
+                                                str(out / "checkpoints"), name_prefix=cfg.algo,
+                                                save_vecnormalize=cfg.normalize))
+        if cfg.max_wall_s is not None:
+            callbacks.append(_wall_clock_callback(cfg.max_wall_s))
+        t0 = time.perf_counter()
+        model.learn(total_timesteps=cfg.total_steps, callback=CallbackList(callbacks),
+                    progress_bar=False)
+        wall = time.perf_counter() - t0
+        model.save(str(out / "model.zip"))
+        if cfg.normalize:
+            env.save(str(out / VECNORM_FILE))
+        summary = {
+            "algo": cfg.algo, "steps": int(model.num_timesteps), "wall_s": round(wall, 1),
+            "steps_per_s": round(model.num_timesteps / wall, 1) if wall > 0 else math.nan,
+            "n_envs": cfg.n_envs, "pose_source": cfg.pose_source, "pose_error_deg": cfg.pose_error_deg,
+            "model": str(out / "model.zip"), "tensorboard": "tensorboard" in formats,
+        }
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        return summary
+    finally:
+        env.close()
+        if eval_env is not None:
+            eval_env.close()
