@@ -19,8 +19,8 @@ SUBCOMMAND_MODULES = (
     "generator.dataset.cli",
     "perception.cli_pose",
     "perception.cli_detector",
-    "sms3d_env.accuracy_study",
-    "sms3d_env.training",
+    "sms3d_env.study.sweep",
+    "sms3d_env.training.cli",
     "sms3d_env.demo",
 )
 
