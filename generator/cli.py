@@ -1,28 +1,19 @@
-"""The ``sms3d`` command line: scene generation, datasets, pose networks, picking."""
+"""``sms3d preview`` and ``sms3d scene``: one generated scene as a picture or as MJCF.
+
+The ``sms3d`` command itself is ``sms3d_env.cli`` (the top package, the one allowed to import
+the others); this module only registers the generator's own commands.
+"""
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
-import sys
-from collections.abc import Sequence
 
 from generator.cli_types import image_side, output_path
 from generator.config import MAX_IMAGE_SIDE, MIN_IMAGE_SIDE
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-# Modules that add their own subcommands with ``register(subparsers)``; named here rather than
-# imported so that ``generator`` itself never imports the perception or environment packages.
-SUBCOMMAND_MODULES = (
-    "generator.dataset.cli",
-    "perception.cli_pose",
-    "perception.cli_detector",
-    "sms3d_env.study.sweep",
-    "sms3d_env.training.cli",
-    "sms3d_env.demo",
-)
 
 
 def _scene_config(args: argparse.Namespace):
@@ -69,11 +60,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="sms3d", description=__doc__)
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    sub.required = True
-
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``sms3d preview`` and ``sms3d scene``."""
     preview = sub.add_parser("preview", help="render one generated scene to a PNG (overhead + oblique view)")
     add_scene_arguments(preview)
     preview.add_argument("--out", type=output_path, default="scene.png", help="PNG to write (default scene.png)")
@@ -86,22 +74,3 @@ def build_parser() -> argparse.ArgumentParser:
     add_scene_arguments(scene)
     scene.add_argument("--out", type=output_path, required=True, help="output folder")
     scene.set_defaults(func=_cmd_scene)
-
-    for module in SUBCOMMAND_MODULES:
-        importlib.import_module(module).register(sub)
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    from generator.errors import ConfigError, MeshError, SceneFormatError
-
-    try:
-        return int(args.func(args) or 0)
-    except (ConfigError, MeshError, SceneFormatError, OSError) as exc:
-        print(f"sms3d {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

@@ -6,7 +6,7 @@ import io
 
 import pytest
 
-from generator.cli import main
+from sms3d_env.cli import main
 
 
 def run_cli(argv: list[str]) -> tuple[int, str]:

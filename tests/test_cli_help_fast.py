@@ -13,7 +13,7 @@ HEAVY = ("torch", "torchvision", "mujoco", "mink", "trimesh", "scipy", "stable_b
 # Runs in a fresh interpreter: this test process has long since imported all of them.
 _PROBE = """
 import contextlib, io, json, sys
-from generator.cli import build_parser, main
+from sms3d_env.cli import build_parser, main
 
 parser = build_parser()
 commands = [a for a in parser._actions if a.dest == "command"][0].choices
@@ -33,3 +33,32 @@ def test_help_imports_no_heavy_packages():
     report = json.loads(result.stdout)
     assert {"generate", "train-pose", "train-detector", "sweep", "train-policy", "demo"} <= set(report["commands"])
     assert report["heavy"] == [], f"`sms3d --help` imported {report['heavy']}; import them inside the commands"
+
+
+def test_the_command_table_is_exactly_what_the_modules_register():
+    from sms3d_env.cli import COMMANDS, build_parser
+
+    def commands(parser):
+        return [a for a in parser._actions if a.dest == "command"][0].choices
+
+    assert list(commands(build_parser())) == list(COMMANDS)  # listed in the table's order
+    for name, module in COMMANDS.items():  # each command's own module registers it
+        assert name in commands(build_parser(name)), (name, module)
+
+
+_ONE_MODULE_PROBE = """
+import contextlib, io, json, sys
+from sms3d_env.cli import main
+with contextlib.redirect_stdout(io.StringIO()):
+    try:
+        main(["generate", "--help"])
+    except SystemExit:
+        pass
+print(json.dumps(sorted(m for m in sys.modules if m.startswith(("perception", "sms3d_env.study", "sms3d_env.training")))))
+"""
+
+
+def test_a_command_imports_only_its_own_module():
+    result = subprocess.run([sys.executable, "-c", _ONE_MODULE_PROBE], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert json.loads(result.stdout) == []

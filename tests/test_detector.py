@@ -10,7 +10,6 @@ import pytest
 import torch
 
 from generator import SceneConfig
-from generator.cli import main as cli_main
 from generator.dataset import DatasetOptions, generate_dataset
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
@@ -31,6 +30,7 @@ from perception.pipeline import PosePipeline
 from perception.plots.show_estimates import estimates_figure
 from perception.pose.estimator import PoseEstimator
 from perception.pose.pose_net import PoseNet, PoseNetConfig
+from sms3d_env.cli import main as cli_main
 
 try:
     import torchvision  # noqa: F401

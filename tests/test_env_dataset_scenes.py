@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 import sms3d_env  # noqa: F401
-from generator.cli import main as sms3d
 from generator.dataset.readers import load_scenes
+from sms3d_env.cli import main as sms3d
 
 
 def test_env_reads_scenes_from_a_dataset_folder(tmp_path):

@@ -236,7 +236,7 @@ def test_bad_field_values_raise_naming_the_field(entry):
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(_bad_entry)
 def test_bad_config_files_fail_the_cli_and_leave_nothing(entry):
-    from generator.cli import main
+    from sms3d_env.cli import main
 
     field, value = entry
     section, name = field.split(".")

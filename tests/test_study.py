@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from generator.cli import main
 from generator.dataset.errors import CorruptFileError
 from generator.errors import ConfigError
+from sms3d_env.cli import main
 from sms3d_env.study import report as study_report
 from sms3d_env.study.report import success_table, tolerable_error, wilson_interval, write_report
 from sms3d_env.study.sweep import SweepConfig, plan_tasks, run_sweep

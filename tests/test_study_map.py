@@ -81,7 +81,7 @@ def test_new_axes_keep_the_historic_part_names():
 @pytest.mark.parametrize("flag, value", [("--position-errors-mm", "-3"), ("--position-errors-mm", "nan"),
                                          ("--tool", "gripper")])
 def test_sweep_refuses_bad_axis_values_by_flag(tmp_path, capsys, flag, value):
-    from generator.cli import main
+    from sms3d_env.cli import main
 
     with pytest.raises(SystemExit) if flag == "--tool" else _no_raise():
         code = main(["sweep", "--out", str(tmp_path / "s"), flag, value])
@@ -118,7 +118,7 @@ def test_a_sweep_killed_with_sigkill_resumes_to_the_same_csv(tmp_path):
 
     args = ["--errors", "0", "20", "--position-errors-mm", "0", "8", "--episodes", "2", "--chunk", "1",
             "--num-mushrooms", "8", "--workers", "1"]
-    cmd = [sys.executable, "-m", "generator.cli", "sweep"]
+    cmd = [sys.executable, "-m", "sms3d_env.cli", "sweep"]
     whole = tmp_path / "whole"
     subprocess.run(cmd + ["--out", str(whole)] + args, check=True, capture_output=True)
     killed = tmp_path / "killed"
