@@ -45,14 +45,18 @@ class PerceptionPose:
             a checkpoint path (``perception.detection.load.load_detector``).
         part: which oracle masks feed the network, ``"mushroom"`` (whole visible mushroom, what
             the shipped network was trained on) or ``"cap"``.
+        realism: render the overhead frame with every camera and scene realism effect
+            (``RealismOptions.all_on()``: stereo noise and shadows, flying pixels, RGB noise,
+            lighting, camera jitter; docs/physics.md), drawn from the episode's ``rng``.
     """
 
     def __init__(self, pipeline: Any = None, part: Literal["cap", "mushroom"] = "mushroom",
-                 detector: str = "shipped") -> None:
+                 detector: str = "shipped", realism: bool = False) -> None:
         if part not in ("cap", "mushroom"):
             raise ValueError(f"part must be 'cap' or 'mushroom', got {part!r}")
         self.pipeline = pipeline
         self.detector = detector
+        self.realism = realism
         self.part = part
         self.fallbacks = 0
         self.last_axis_error_deg: float | None = None
@@ -75,7 +79,15 @@ class PerceptionPose:
         if self._renderer is None or (self._renderer.height, self._renderer.width) != (cam.height, cam.width):
             self.close()
             self._renderer = SceneRenderer(cam.height, cam.width)
-        frame = self._renderer.render(scene, amodal=False)
+        if self.realism:
+            from generator.dataset.options import DatasetOptions, RealismOptions
+
+            # A child stream: the episode's own draws after this one do not depend on the effects.
+            camera_rng = np.random.default_rng(rng.integers(2**63))
+            frame = self._renderer.render(scene, DatasetOptions(realism=RealismOptions.all_on()), camera_rng,
+                                          amodal=False)
+        else:
+            frame = self._renderer.render(scene, amodal=False)
         labels = frame.labels_cap if self.part == "cap" else frame.labels_mushroom
         pipeline = self._pipeline()
         if pipeline.detector is None:

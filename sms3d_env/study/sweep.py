@@ -56,6 +56,7 @@ class SweepConfig:
     variants: tuple[str, ...] = ("default",)
     perception_episodes: int = 0  # episodes with the perception pose source (default physics)
     perception_detector: str = "shipped"  # stage 1 of the perception episodes: "shipped", "oracle" or a path
+    perception_realism: bool = False  # perception episodes see the camera with every realism effect
     chunk: int = 10  # episodes per task (one part file)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     picker: str = "scripted"  # "scripted", "policy[:PATH]" or "residual:PATH" (sms3d_env.pickers.registry)
@@ -155,7 +156,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     if task.source == "perception":
         from sms3d_env.pose_sources.perception import PerceptionPose
 
-        source: Any = PerceptionPose(detector=config.perception_detector)
+        source: Any = PerceptionPose(detector=config.perception_detector, realism=config.perception_realism)
     else:
         source = NoisyPose(task.error_deg, position_error=task.position_error_mm / 1000,
                            along_axis=config.position_along_axis)
@@ -192,19 +193,27 @@ def _run_and_save(task: Task, config: SweepConfig, parts: Path) -> str:
 
 # Settings that change what a part file holds without changing its name: a folder's parts can
 # only be reused by a sweep that agrees on them (errors, episodes and variants may grow).
-RESUME_KEYS = ("seed", "chunk", "env_kwargs", "perception_detector", "picker", "picker_sha256",
-               "position_along_axis")
+RESUME_KEYS = ("seed", "chunk", "env_kwargs", "perception_detector", "perception_realism", "picker",
+               "picker_sha256", "position_along_axis")
 # What a folder recorded before a key existed (its parts were made with this value).
-_RESUME_DEFAULTS = {"picker": "scripted", "picker_sha256": None, "position_along_axis": False}
+_RESUME_DEFAULTS = {"picker": "scripted", "picker_sha256": None, "position_along_axis": False,
+                    "perception_realism": False}
 
 
-def _pose_weights_digest() -> str:
-    """SHA-256 (16 hex digits) of the shipped pose weights the perception episodes use."""
+def _pose_weights_digest(config: SweepConfig) -> str:
+    """SHA-256 (16 hex digits) of the weights the perception episodes use: the shipped pose
+    network, and the stage-1 detector's file unless it is the oracle."""
     import hashlib
 
+    from perception.detection.load import SHIPPED_SEGMENTER
     from perception.pose.estimator import default_weights_path
 
-    return hashlib.sha256(default_weights_path().read_bytes()).hexdigest()[:16]
+    digest = hashlib.sha256(default_weights_path().read_bytes())
+    if config.perception_detector != "oracle":
+        detector = SHIPPED_SEGMENTER if config.perception_detector == "shipped" else Path(config.perception_detector)
+        if detector.is_file():  # a missing file is named when the episodes load it
+            digest.update(detector.read_bytes())
+    return digest.hexdigest()[:16]
 
 
 def _picker_digest(config: SweepConfig) -> str | None:
@@ -223,7 +232,7 @@ def _picker_digest(config: SweepConfig) -> str | None:
 def _settings(config: SweepConfig) -> dict[str, Any]:
     """What ``sweep_config.json`` records: the config, the pose weights behind perception parts
     and the learned picker's model."""
-    digest = _pose_weights_digest() if config.perception_episodes else None
+    digest = _pose_weights_digest(config) if config.perception_episodes else None
     return json.loads(json.dumps({**dataclasses.asdict(config), "pose_weights_sha256": digest,
                                   "picker_sha256": _picker_digest(config)}, default=str))
 
@@ -322,7 +331,7 @@ def _cmd_sweep(args: Any) -> int:
             errors_deg=tuple(args.errors), episodes=args.episodes, seed=args.seed,
             num_mushrooms=args.num_mushrooms, variants=tuple(args.variants), chunk=args.chunk,
             perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
-            picker=args.picker, position_errors_mm=tuple(args.position_errors_mm),
+            perception_realism=args.perception_realism, picker=args.picker, position_errors_mm=tuple(args.position_errors_mm),
             position_along_axis=args.position_along_axis, tools=tuple(args.tool),
         )
     except ConfigError as exc:
@@ -427,15 +436,18 @@ def register(subparsers: Any) -> None:
                    help="process pool (default) or Ray (same rows)")
     p.add_argument("--variants", nargs="+", default=["default"], choices=sorted(SENSITIVITY_VARIANTS),
                    help="physics settings to compare (sensitivity to unsourced assumptions)")
-    p.add_argument("--perception-episodes", type=int, default=0,
+    p.add_argument("--perception-episodes", type=int, default=SweepConfig.perception_episodes,
                    help="also run this many episodes with the perception pose source (shipped network)")
     p.add_argument("--perception-detector", default=SweepConfig.perception_detector,
                    help="stage 1 of the perception episodes: 'shipped' (the shipped RGB-D segmenter, default), "
                         "'oracle' (MuJoCo's segmentation masks) or a train-segmenter/train-detector checkpoint")
-    p.add_argument("--picker", default="scripted",
+    p.add_argument("--perception-realism", action="store_true",
+                   help="the perception episodes' overhead camera has every realism effect (stereo noise and "
+                        "shadows, flying pixels, RGB noise, lighting, camera jitter; as `sms3d generate --realism`)")
+    p.add_argument("--picker", default=SweepConfig.picker,
                    help="scripted (default), policy (the shipped policy), policy:PATH/model.zip or "
                         "residual:PATH/model.zip; every picker sees the same seeded episodes")
-    p.add_argument("--chunk", type=int, default=10, help="episodes per resumable task (>= 1)")
+    p.add_argument("--chunk", type=int, default=SweepConfig.chunk, help="episodes per resumable task (>= 1)")
     p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 1)), help="processes")
     p.set_defaults(func=_cmd_sweep)
 
