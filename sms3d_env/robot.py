@@ -63,8 +63,9 @@ class RobotConfig:
 
     Attributes:
         mount_pos: arm base position in the world (m). The bed patch is centred on the origin with
-            the soil near z = 0; the base stands beside it so the whole patch is reachable with the
-            tool pointing down and tilted by up to 45 degrees (checked in tests/test_env_robot.py).
+            the soil near z = 0; the base stands beside it so that most of the patch is reachable
+            with the tool pointing down (``targets.select_target`` flags each target's reach in
+            ``info["reachable"]``; the study counts only reachable targets).
         mount_yaw_deg: base rotation about world z.
         tool: ``"suction"`` (default) or ``"hand"`` (the Jaco 3-finger hand on finger position
             actuators).

@@ -13,7 +13,7 @@ embedding (no attention at full resolution), then N → N/8 → N/32 with attent
 The forward passes evaluate these formulas in a cheaper order (projections before gathers,
 folded biases, late softmax normalisation, CPU batches in chunks, one kNN search shared by the
 first attention block and the second transition down) with the same FPS and kNN sets;
-``tests/test_perception_backbone_equivalence.py`` pins them to the plain formulation.
+``tests/perception/pose/test_backbones.py`` pins them to the plain formulation.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ from generator.dataset import writer as writer_module
 from generator.dataset.cli import main as cli_main
 from generator.dataset.readers import InstancePointCloudDataset, read_scene_files
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 CFG = SceneConfig().replace(camera__width=160, camera__height=120, placement__num_mushrooms=8)
 
 
