@@ -11,6 +11,12 @@ from __future__ import annotations
 #: ``perception.pose.rotations.ROTATION_HEADS``, which defines them (a test keeps the two equal).
 HEAD_NAMES: tuple[str, ...] = ("6d", "6d_stem", "9d", "quat", "euler")
 
+#: Point-cloud backbones: the keys of ``perception.pose.backbones.BACKBONES`` (a test keeps them equal).
+BACKBONE_NAMES: tuple[str, ...] = ("point_transformer", "pointnet", "pointnet2")
+
+#: Rotation losses of the pose network (``perception.pose.rotations.rotation_loss``).
+ROTATION_LOSSES: tuple[str, ...] = ("geodesic", "axis", "geodesic+axis")
+
 #: Mask R-CNN configurations (see :mod:`perception.detection.maskrcnn`).
 ARCHITECTURES = ("mobilenet_v3_fpn", "resnet50_fpn_v2")
 

@@ -80,8 +80,8 @@ def _pipeline(args: argparse.Namespace):
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from perception.detection.maskrcnn import DetectorConfig
-    from perception.detection.train_detector import DetectorTrainConfig, train_detector
+    from perception.detection.maskrcnn_config import DetectorConfig, DetectorTrainConfig
+    from perception.detection.train_detector import train_detector
 
     _set_threads(args.threads)
     config = DetectorConfig(arch=args.arch, category=args.category, min_size=args.min_size, max_size=args.max_size)
@@ -190,6 +190,7 @@ def _add_dataclass_flags(p: argparse.ArgumentParser, cls: type, helps: dict[str,
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
+    from perception.detection.maskrcnn_config import DetectorConfig, DetectorTrainConfig
     from perception.detection.segmenter_config import SegmenterTrainConfig
 
     p = subparsers.add_parser("train-segmenter", help="train the RGB-D segmenter (stage 1) on generated datasets (resumable)")
@@ -203,14 +204,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("train-detector", help="train Mask R-CNN on a dataset's COCO files (resumable)")
     _common(p)
     p.add_argument("--out", required=True, help="run folder: last.pt, best.pt, log.csv")
-    p.add_argument("--arch", choices=ARCHITECTURES, default="mobilenet_v3_fpn")
-    p.add_argument("--category", choices=tuple(CATEGORIES), default="mushroom")
-    p.add_argument("--epochs", type=int, default=20)
-    p.add_argument("--batch-size", type=int, default=2)
-    p.add_argument("--lr", type=float, default=3e-4)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--min-size", type=int, default=480, help="shorter image side the network sees")
-    p.add_argument("--max-size", type=int, default=640, help="longer image side the network sees")
+    net, train = DetectorConfig(), DetectorTrainConfig()  # the flags' defaults are the configs'
+    p.add_argument("--arch", choices=ARCHITECTURES, default=net.arch)
+    p.add_argument("--category", choices=tuple(CATEGORIES), default=net.category)
+    p.add_argument("--epochs", type=int, default=train.epochs)
+    p.add_argument("--batch-size", type=int, default=train.batch_size)
+    p.add_argument("--lr", type=float, default=train.lr)
+    p.add_argument("--seed", type=int, default=train.seed)
+    p.add_argument("--min-size", type=int, default=net.min_size, help="shorter image side the network sees")
+    p.add_argument("--max-size", type=int, default=net.max_size, help="longer image side the network sees")
     p.add_argument("--max-images", type=_positive_int, help="use only the first N training images (N >= 1; default: all)")
     p.add_argument("--pretrained", action="store_true", help="start from torchvision weights already in the torch hub cache")
     p.add_argument("--no-augment", action="store_true", help="no random flips")

@@ -22,8 +22,9 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from perception.choices import HEAD_NAMES
+from perception.choices import BACKBONE_NAMES, HEAD_NAMES, ROTATION_LOSSES
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
+from perception.pose.config import PoseNetConfig, TrainConfig
 
 # torch, the data pipeline and the networks are imported inside the commands: ``register`` runs
 # for every ``sms3d`` invocation, ``--help`` included, and loading them takes seconds.
@@ -85,8 +86,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     import torch
 
     from perception.pose.data import PointCloudPoseDataset
-    from perception.pose.pose_net import PoseNetConfig
-    from perception.pose.train import TrainConfig, train
+    from perception.pose.train import train
 
     torch.set_num_threads(args.threads)
     try:
@@ -162,15 +162,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``train-pose`` and ``eval-pose`` to ``subparsers``."""
     p = subparsers.add_parser("train-pose", help="train the pose network on rendered single-mushroom views")
     p.add_argument("--out", required=True, help="output folder (checkpoints, log.csv)")
-    p.add_argument("--backbone", default="point_transformer", choices=("point_transformer", "pointnet", "pointnet2"))
-    p.add_argument("--head", default="6d", choices=HEAD_NAMES)
+    net, train = PoseNetConfig(), TrainConfig()  # the flags' defaults are the configs'
+    p.add_argument("--backbone", default=net.backbone, choices=BACKBONE_NAMES)
+    p.add_argument("--head", default=net.head, choices=HEAD_NAMES)
     p.add_argument("--rgb", action="store_true", help="feed RGB with the points")
-    p.add_argument("--num-points", type=int, default=1024)
-    p.add_argument("--epochs", type=int, default=50)
-    p.add_argument("--batch-size", type=int, default=32)
-    p.add_argument("--lr", type=float, default=1e-4)
-    p.add_argument("--patience", type=int, default=5, help="ReduceLROnPlateau patience (epochs)")
-    p.add_argument("--loss", default="geodesic", choices=("geodesic", "axis", "geodesic+axis"))
+    p.add_argument("--num-points", type=int, default=net.num_points)
+    p.add_argument("--epochs", type=int, default=train.epochs)
+    p.add_argument("--batch-size", type=int, default=train.batch_size)
+    p.add_argument("--lr", type=float, default=train.lr)
+    p.add_argument("--patience", type=int, default=train.plateau_patience, help="ReduceLROnPlateau patience (epochs)")
+    p.add_argument("--loss", default=train.loss, choices=ROTATION_LOSSES)
     p.add_argument("--num-train", type=int, default=4000)
     p.add_argument("--num-val", type=int, default=500)
     p.add_argument("--model-ids", type=_ids, default=DEFAULT_TRAIN_MODEL_IDS, help="generator model ids to render")
@@ -189,7 +190,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--cap-only", action="store_true", help="with --scenes and oracle masks: cap points only")
     p.add_argument("--cache", help="folder to cache rendered views as .npz")
     p.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this wall time")
-    p.add_argument("--select-by", choices=("loss", "axis"), default="loss",
+    p.add_argument("--select-by", choices=("loss", "axis"), default=train.select_by,
                    help="which epoch best.pt keeps: lowest validation loss or lowest mean stem-axis error")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu")

@@ -1,3 +1,47 @@
+"""Fixtures shared across the test tree: rendered beds and small generated datasets, each made
+once per session and cached by its arguments (rendering and generation are the slow parts)."""
+
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+
+from functools import cache
+
+import pytest
+
+
+@pytest.fixture(scope="session")
+def render_bed():
+    """``render_bed(num_mushrooms, seed, width=640, height=480) -> (scene, frame)``: a generated
+    bed and its clean overhead render (``generator.dataset.render.Frame``, no amodal masks)."""
+    from generator import SceneConfig, generate_scene
+    from generator.dataset.render import SceneRenderer
+
+    @cache
+    def make(num_mushrooms: int, seed: int, width: int = 640, height: int = 480):
+        config = SceneConfig().replace(placement__num_mushrooms=num_mushrooms, camera__width=width,
+                                       camera__height=height)
+        scene = generate_scene(config, seed=seed)
+        with SceneRenderer(height, width) as renderer:
+            return scene, renderer.render(scene, amodal=False)
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def small_dataset(tmp_path_factory):
+    """``small_dataset(num_scenes, num_mushrooms, seed, split_ratios) -> Path``: a ``sms3d
+    generate`` folder of 256 x 192 beds seen from 25 cm (small enough to train on in seconds)."""
+    from generator import SceneConfig
+    from generator.dataset import DatasetOptions, generate_dataset
+
+    @cache
+    def make(num_scenes: int, num_mushrooms: int, seed: int, split_ratios: tuple[float, float, float]):
+        out = tmp_path_factory.mktemp(f"beds_{num_scenes}x{num_mushrooms}_seed{seed}")
+        config = SceneConfig().replace(camera__width=256, camera__height=192, camera__height_above_soil=0.25,
+                                       placement__num_mushrooms=num_mushrooms)
+        generate_dataset(out, config, num_scenes, seed=seed, options=DatasetOptions(split_ratios=split_ratios),
+                         progress=False)
+        return out
+
+    return make

@@ -20,7 +20,7 @@ from torch.utils.data import Dataset
 from generator.dataset.coco import decode_mask
 from generator.dataset.errors import CorruptFileError
 from generator.dataset.writer import DEPTH_SCALE
-from perception.detection.maskrcnn import CATEGORIES
+from perception.choices import CATEGORIES
 from perception.errors import PerceptionConfigError
 
 T = TypeVar("T")

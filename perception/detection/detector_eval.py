@@ -22,9 +22,9 @@ from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
+from perception.choices import CATEGORIES
 from perception.detection.detector import Detection, Detector
 from perception.detection.detector_data import CocoDetectionDataset, first_n
-from perception.detection.maskrcnn import CATEGORIES
 
 
 @dataclass(frozen=True)

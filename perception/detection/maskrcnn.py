@@ -14,7 +14,7 @@ and otherwise raises ``PretrainedWeightsMissing`` naming the file to put there.
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -22,9 +22,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from perception.choices import ARCHITECTURES, CATEGORIES
 from perception.detection.detector import Detection
-from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
+from perception.detection.maskrcnn_config import DetectorConfig
+from perception.errors import CheckpointFormatError, CheckpointMismatchError
 
 CHECKPOINT_FORMAT = "sms3d-maskrcnn-1"
 
@@ -43,43 +43,6 @@ def _import_torchvision():
             f"({exc}); install both from the same release, e.g. `pip install torch torchvision`"
         ) from exc
     return detection
-
-
-@dataclass(frozen=True)
-class DetectorConfig:
-    """What defines a detector network; stored in its checkpoints.
-
-    ``category`` is the dataset's COCO category it detects (``mushroom``: the visible whole
-    mushroom, which the pose network's default input needs; ``mushroom_cap``: the visible cap).
-    Images are used at their own size when it lies within ``min_size``/``max_size`` (640 × 480
-    is not rescaled by default: upscaling would only cost time on a CPU).
-    """
-
-    arch: str = "mobilenet_v3_fpn"
-    category: str = "mushroom"
-    min_size: int = 480
-    max_size: int = 640
-    score_threshold: float = 0.5
-    mask_threshold: float = 0.5
-
-    def __post_init__(self) -> None:
-        if self.arch not in ARCHITECTURES:
-            raise PerceptionConfigError("arch", f"{self.arch!r} is not one of {ARCHITECTURES}")
-        if self.category not in CATEGORIES:
-            raise PerceptionConfigError("category", f"{self.category!r} is not one of {tuple(CATEGORIES)}")
-        if not 32 <= self.min_size <= self.max_size:
-            raise PerceptionConfigError("min_size", f"need 32 <= min_size <= max_size, got {self.min_size}, {self.max_size}")
-        for name in ("score_threshold", "mask_threshold"):
-            if not 0.0 <= getattr(self, name) < 1.0:
-                raise PerceptionConfigError(name, f"must lie in [0, 1), got {getattr(self, name)}")
-
-    @property
-    def category_id(self) -> int:
-        return CATEGORIES[self.category]
-
-    def architecture(self) -> dict[str, Any]:
-        """The fields that shape the weights (thresholds do not)."""
-        return {"arch": self.arch, "category": self.category}
 
 
 def _cached_weights(weights: Any) -> None:

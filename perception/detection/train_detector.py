@@ -13,7 +13,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -29,38 +29,8 @@ from perception.detection.maskrcnn import (
     read_detector_checkpoint,
     save_detector,
 )
+from perception.detection.maskrcnn_config import DetectorTrainConfig
 from perception.errors import PerceptionConfigError
-
-
-@dataclass(frozen=True)
-class DetectorTrainConfig:
-    """Optimisation settings. AdamW with a linear warm-up and a cosine decay to zero over all
-    epochs suits training from scratch on small synthetic sets (at a constant rate the scores of
-    a from-scratch network keep swinging from epoch to epoch); ``max_images`` caps the training images (for smoke runs and overfitting);
-    ``passes_per_epoch`` repeats a small training set within an epoch, so that tiny sets are not
-    checkpointed and validated after every iteration."""
-
-    epochs: int = 20
-    batch_size: int = 2
-    lr: float = 3e-4
-    weight_decay: float = 1e-4
-    warmup_iters: int = 100
-    seed: int = 0
-    augment: bool = True
-    max_images: int | None = None
-    passes_per_epoch: int = 1
-    pretrained: bool = False
-    val_split: str = "val"
-    max_val_images: int | None = 20
-
-    def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size", "passes_per_epoch"):
-            if getattr(self, name) < 1:
-                raise PerceptionConfigError(name, f"must be >= 1, got {getattr(self, name)}")
-        if not (self.lr > 0 and math.isfinite(self.lr)):
-            raise PerceptionConfigError("lr", f"must be a positive number, got {self.lr}")
-        if self.max_images is not None and self.max_images < 1:
-            raise PerceptionConfigError("max_images", f"must be >= 1, got {self.max_images}")
 
 
 def _write_log(path: Path, rows: list[dict[str, Any]]) -> None:

@@ -13,58 +13,19 @@ from __future__ import annotations
 import dataclasses
 import os
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import torch
 from torch import nn
 
-from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
+from perception.errors import CheckpointFormatError, CheckpointMismatchError
 from perception.pose import rotations as rot
-from perception.pose.backbones import BACKBONES, build_backbone
+from perception.pose.backbones import build_backbone
+from perception.pose.config import PoseNetConfig
 
-Head = Literal["6d", "6d_stem", "9d", "quat", "euler"]  # the keys of rotations.ROTATION_HEADS
 CHECKPOINT_FORMAT = "sms3d-posenet"
 CHECKPOINT_VERSION = 1
-
-
-@dataclass(frozen=True)
-class PoseNetConfig:
-    """Shape of a :class:`PoseNet`; validated on construction."""
-
-    backbone: str = "point_transformer"
-    head: Head = "6d"
-    use_rgb: bool = False
-    num_points: int = 1024
-    hidden: int = 128  # width of the head MLP
-
-    def __post_init__(self) -> None:
-        if self.backbone not in BACKBONES:
-            raise PerceptionConfigError("backbone", f"expected one of {sorted(BACKBONES)}, got {self.backbone!r}")
-        if self.head not in rot.ROTATION_HEADS:
-            raise PerceptionConfigError("head", f"expected one of {sorted(rot.ROTATION_HEADS)}, got {self.head!r}")
-        if not isinstance(self.use_rgb, bool):
-            raise PerceptionConfigError("use_rgb", f"must be a bool, got {self.use_rgb!r}")
-        for name, lo in (("num_points", 16), ("hidden", 1)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise PerceptionConfigError(name, f"must be an int >= {lo}, got {v!r}")
-
-    @property
-    def in_channels(self) -> int:
-        return 6 if self.use_rgb else 3
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> PoseNetConfig:
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise PerceptionConfigError(unknown[0], "unknown PoseNetConfig field")
-        return cls(**d)
 
 
 class PoseNet(nn.Module):

@@ -28,8 +28,9 @@ from typing import Literal
 import roma
 import torch
 
+from perception.choices import ROTATION_LOSSES
+
 RotationLoss = Literal["geodesic", "axis", "geodesic+axis"]
-ROTATION_LOSSES: tuple[str, ...] = ("geodesic", "axis", "geodesic+axis")
 
 _DEFAULT_EPS = 1e-6
 

@@ -10,22 +10,18 @@ and stem-axis error in degrees.
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import random
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from perception.errors import PerceptionConfigError
-from perception.pose.augment import AugmentConfig
+from perception.pose.config import TrainConfig
 from perception.pose.metrics import PoseMetrics, errors_deg, summarize
 from perception.pose.pose_net import (
     PoseNet,
@@ -35,61 +31,12 @@ from perception.pose.pose_net import (
     load_checkpoint,
     save_checkpoint,
 )
-from perception.pose.rotations import ROTATION_LOSSES, rotation_loss
+from perception.pose.rotations import rotation_loss
 
 CSV_FIELDS = (
     "epoch", "lr", "train_loss", "val_loss", "val_mean_geodesic_deg", "val_median_geodesic_deg",
     "val_mean_axis_deg", "val_median_axis_deg", "epoch_s",
 )  # fmt: skip
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """Optimisation settings (the network's shape is a :class:`PoseNetConfig`)."""
-
-    epochs: int = 50
-    batch_size: int = 32
-    lr: float = 1e-4
-    weight_decay: float = 0.0
-    loss: str = "geodesic"
-    plateau_factor: float = 0.5
-    plateau_patience: int = 5
-    min_lr: float = 1e-6
-    seed: int = 0
-    device: str = "cpu"
-    num_workers: int = 0
-    augment: AugmentConfig | None = field(default_factory=AugmentConfig)
-    progress: bool = True
-    time_limit_s: float | None = None  # stop after the first epoch that ends past this budget
-    select_by: str = "loss"  # best.pt: lowest validation "loss", or lowest mean stem-"axis" error
-
-    def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size", "plateau_patience"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise PerceptionConfigError(name, f"must be an int >= 1, got {v!r}")
-        if not isinstance(self.num_workers, int) or self.num_workers < 0:
-            raise PerceptionConfigError("num_workers", f"must be an int >= 0, got {self.num_workers!r}")
-        for name in ("lr", "plateau_factor"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-                raise PerceptionConfigError(name, f"must be a finite number > 0, got {v!r}")
-        if not 0 < self.plateau_factor < 1:
-            raise PerceptionConfigError("plateau_factor", f"must be in (0, 1), got {self.plateau_factor!r}")
-        if not (np.isfinite(self.weight_decay) and self.weight_decay >= 0):
-            raise PerceptionConfigError("weight_decay", f"must be >= 0, got {self.weight_decay!r}")
-        if self.select_by not in ("loss", "axis"):
-            raise PerceptionConfigError("select_by", f"expected 'loss' or 'axis', got {self.select_by!r}")
-        if self.loss not in ROTATION_LOSSES:
-            raise PerceptionConfigError("loss", f"expected one of {ROTATION_LOSSES}, got {self.loss!r}")
-        if self.device != "cpu" and not self.device.startswith("cuda"):
-            raise PerceptionConfigError("device", f"expected 'cpu' or 'cuda[:i]', got {self.device!r}")
-        if self.device.startswith("cuda") and not torch.cuda.is_available():
-            raise PerceptionConfigError("device", "CUDA requested but not available")
-
-    def to_dict(self) -> dict[str, Any]:
-        d = dataclasses.asdict(self)
-        return d
 
 
 def seed_everything(seed: int) -> None:

@@ -3,9 +3,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from generator import SceneConfig, generate_scene
 from generator.camera import project
-from generator.dataset.render import SceneRenderer
 from perception.detection.detector import Detection, detections_from_labels
 from perception.errors import PerceptionConfigError
 from perception.evaluation.eval_pipeline import GroundTruthMushroom, match
@@ -21,11 +19,8 @@ from perception.pose.pose_net import PoseNet, PoseNetConfig
 
 
 @pytest.fixture(scope="module")
-def frame_and_scene():
-    config = SceneConfig().replace(placement__num_mushrooms=12, camera__width=320, camera__height=240)
-    scene = generate_scene(config, seed=4)
-    with SceneRenderer(240, 320) as renderer:
-        frame = renderer.render(scene, amodal=False)
+def frame_and_scene(render_bed):
+    scene, frame = render_bed(12, 4, 320, 240)
     return frame, scene
 
 

@@ -8,8 +8,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from generator import SceneConfig, generate_scene
-from generator.dataset.render import SceneRenderer
 from perception.detection.detector import detections_from_labels
 from perception.pipeline import PosePipeline
 from perception.pose.estimator import PoseEstimator
@@ -27,10 +25,9 @@ class LabelDetector:
 
 
 @pytest.fixture(scope="module")
-def scene_and_labels():
-    scene = generate_scene(SceneConfig().replace(placement__num_mushrooms=8, camera__width=320, camera__height=240), seed=3)
-    with SceneRenderer(240, 320) as renderer:
-        labels = renderer.render(scene, amodal=False).labels_mushroom
+def scene_and_labels(render_bed):
+    scene, frame = render_bed(8, 3, 320, 240)
+    labels = frame.labels_mushroom
     target = max(range(len(scene.instances)), key=lambda i: (labels == i + 1).sum())  # the most visible
     return scene, labels, target
 

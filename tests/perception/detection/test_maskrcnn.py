@@ -9,8 +9,6 @@ import numpy as np
 import pytest
 import torch
 
-from generator import SceneConfig
-from generator.dataset import DatasetOptions, generate_dataset
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
 from perception.detection.detector import detections_from_labels
@@ -41,13 +39,9 @@ SMALL = DetectorConfig(min_size=192, max_size=256)
 
 
 @pytest.fixture(scope="module")
-def beds(tmp_path_factory):
+def beds(small_dataset):
     """Two 256 x 192 beds of 6 mushrooms seen from 25 cm, both in the train split."""
-    out = tmp_path_factory.mktemp("beds")
-    config = SceneConfig().replace(camera__width=256, camera__height=192, camera__height_above_soil=0.25,
-                                   placement__num_mushrooms=6)
-    generate_dataset(out, config, 2, seed=5, options=DatasetOptions(split_ratios=(1.0, 0.0, 0.0)), progress=False)
-    return out
+    return small_dataset(2, 6, 5, (1.0, 0.0, 0.0))
 
 
 class OracleDetector:

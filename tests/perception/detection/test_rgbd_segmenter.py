@@ -11,8 +11,6 @@ import torch
 from hypothesis import given
 from hypothesis import strategies as st
 
-from generator import SceneConfig
-from generator.dataset import DatasetOptions, generate_dataset
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
 from perception.detection.detector import detections_from_labels, mask_iou
@@ -31,13 +29,9 @@ from perception.errors import CheckpointFormatError, PerceptionConfigError, Pipe
 
 
 @pytest.fixture(scope="module")
-def beds(tmp_path_factory):
+def beds(small_dataset):
     """Four 256 x 192 beds of 8 mushrooms seen from 25 cm, in the train and val splits."""
-    out = tmp_path_factory.mktemp("beds")
-    config = SceneConfig().replace(camera__width=256, camera__height=192, camera__height_above_soil=0.25,
-                                   placement__num_mushrooms=8)
-    generate_dataset(out, config, 4, seed=11, options=DatasetOptions(split_ratios=(0.5, 0.5, 0.0)), progress=False)
-    return out
+    return small_dataset(4, 8, 11, (0.5, 0.5, 0.0))
 
 
 def _logit(p: np.ndarray) -> np.ndarray:

@@ -9,8 +9,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import pytest
 import torch
 
-from generator import SceneConfig, generate_scene
-from generator.dataset.render import SceneRenderer
 from perception.detection.detector import detections_from_labels, mask_iou
 from perception.detection.load import SHIPPED_SEGMENTER, describe_detector, load_detector
 from perception.detection.rgbd_segmenter import RGBDSegmenter
@@ -20,11 +18,9 @@ from sms3d_env.pose_sources import PerceptionPose
 
 
 @pytest.fixture(scope="module")
-def bed_frame():
+def bed_frame(render_bed):
     """A 640 x 480 bed of 15 mushrooms (a seed no training set used), rendered cleanly."""
-    scene = generate_scene(SceneConfig().replace(placement__num_mushrooms=15), seed=424242)
-    with SceneRenderer(480, 640) as renderer:
-        return renderer.render(scene, amodal=False)
+    return render_bed(15, 424242)[1]
 
 
 def test_the_shipped_segmenter_is_small_and_loads_without_a_download(monkeypatch):
