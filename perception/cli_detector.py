@@ -161,8 +161,9 @@ def _pipeline_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--weights", help="pose-network checkpoint (default: the shipped weights)")
     p.add_argument("--score-threshold", type=float, default=None,
                    help="detections below this score are dropped (default: the detector's own)")
-    p.add_argument("--soil-margin-mm", type=float, default=6.0,
-                   help="with a learned detector, drop mask pixels within this distance of the local soil depth (0: off)")
+    p.add_argument("--soil-margin-mm", type=float, default=0.0,
+                   help="with a learned detector, drop mask pixels within this distance of the local soil depth (default 0: "
+                        "off, as in PosePipeline; the shipped pose network was trained on the shipped segmenter's masks)")
 
 
 #: ``SegmenterTrainConfig`` fields that ``train-segmenter`` exposes, with their help; each flag's
