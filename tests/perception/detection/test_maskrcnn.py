@@ -183,10 +183,11 @@ def test_oracle_pipeline_finds_every_mushroom_with_the_networks_error(beds, tmp_
     assert summary["recall"] >= 0.9 and summary["precision"] == 1.0
     # The shipped weights' held-out scene error is about 9-11 degrees (benchmarks/RESULTS.md).
     assert summary["axis_error_deg"]["mean"] < 20.0
-    # The cap top (where a picker aims) within a few millimetres where the axis is right (2.2 mm
-    # mean on held-out B); a wrong axis moves it across the dome.
+    # The cap top (where a picker aims) within a few millimetres where the axis is right (the
+    # shipped stage-6 network with exact masks: 3.4 mm mean on held-out clean 40-mushroom beds,
+    # 2.7 mm for stage 5); a wrong axis moves it across the dome.
     good_axis = [r for r in report.rows if r["matched"] and r["axis_error_deg"] < 5.0]
-    assert len(good_axis) >= 3 and max(r["cap_top_error_mm"] for r in good_axis) < 3.0
+    assert len(good_axis) >= 3 and max(r["cap_top_error_mm"] for r in good_axis) < 5.0
     assert "cap top position (mm)" in report.markdown()
     assert {b["n"] for b in summary["by_tilt_deg"]} and sum(b["n"] for b in summary["by_tilt_deg"]) == report.ground_truth
     json.dumps(summary)  # JSON-ready
