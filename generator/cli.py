@@ -7,13 +7,9 @@ the others); this module only registers the generator's own commands.
 from __future__ import annotations
 
 import argparse
-import os
 
 from generator.cli_types import image_side, output_path
 from generator.config import MAX_IMAGE_SIDE, MIN_IMAGE_SIDE
-
-os.environ.setdefault("MUJOCO_GL", "egl")
-
 
 
 def _scene_config(args: argparse.Namespace):

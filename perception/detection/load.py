@@ -37,14 +37,17 @@ def load_detector(spec: str | None = "shipped", threads: int | None = None, **ov
     """
     if spec in (None, "oracle"):
         return None
-    from perception.detection.rgbd_segmenter import is_segmenter_checkpoint, load_segmenter
+    from perception.detection.rgbd_segmenter import load_segmenter
+    from perception.errors import CheckpointFormatError
 
     path = SHIPPED_SEGMENTER if spec == "shipped" else Path(spec)
     if not path.is_file():
         hint = " (the shipped weights are missing: reinstall the package)" if spec == "shipped" else ""
         raise FileNotFoundError(f"{path}: no such detector checkpoint{hint}; use 'shipped', 'oracle' or a path")
-    if is_segmenter_checkpoint(path):
+    try:
         return load_segmenter(path, threads=threads, **overrides)
+    except CheckpointFormatError:  # not a segmenter: Mask R-CNN's reader names what else it is
+        pass
     from perception.detection.maskrcnn import MaskRCNNDetector
 
     return MaskRCNNDetector.from_checkpoint(path, **overrides)

@@ -18,13 +18,12 @@ offset to the centre, grouped by nearest centre):
   its peak's heat.
 
 Shapes: images (H, W, 3) uint8 and depth (H, W) float metres (0 = invalid); H and W need not be
-multiples of anything (inputs are padded to a multiple of 32 at half resolution).
+multiples of anything (the half-resolution input is padded to a multiple of ``PAD_MULTIPLE``).
 """
 
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 from typing import Any
 
@@ -37,14 +36,15 @@ from torch import nn
 from perception.detection.detector import Detection
 from perception.detection.segmenter_config import SegmenterConfig
 from perception.errors import CheckpointFormatError, PerceptionConfigError, PipelineInputError
+from perception.run_files import atomic_torch_save
 
 CHECKPOINT_FORMAT = "sms3d-rgbd-segmenter-1"
 #: Height above the median depth is fed in units of this many metres (mushrooms stand 2–10 cm).
 DEPTH_SCALE_M = 0.05
 #: Offsets are predicted in half-resolution pixels divided by this (keeps targets near unit size).
 OFFSET_SCALE = 16.0
-#: The network's input is padded to a multiple of this (its four 2× poolings, and one more).
-PAD_MULTIPLE = 32
+#: The network's half-resolution input is padded to a multiple of this (its four 2× poolings).
+PAD_MULTIPLE = 16
 
 
 def _block(cin: int, cout: int) -> nn.Sequential:
@@ -112,7 +112,7 @@ def network_input(rgb: np.ndarray, depth: np.ndarray) -> np.ndarray:
     return np.concatenate([small_rgb.transpose(2, 0, 1), height[None], valid[None].astype(np.float32)], 0)
 
 
-def pad_to_multiple(x: torch.Tensor, multiple: int = PAD_MULTIPLE // 2) -> torch.Tensor:
+def pad_to_multiple(x: torch.Tensor, multiple: int = PAD_MULTIPLE) -> torch.Tensor:
     """Zero-pad the last two dimensions of ``x`` up to multiples of ``multiple``."""
     h, w = x.shape[-2:]
     return F.pad(x, (0, (-w) % multiple, 0, (-h) % multiple))
@@ -180,10 +180,8 @@ def build_segmenter(config: SegmenterConfig | None = None) -> RGBDUNet:
 
 def save_segmenter(path: str | Path, model: RGBDUNet, config: SegmenterConfig, extra: dict[str, Any] | None = None) -> None:
     """Write a checkpoint atomically (a killed write never leaves a half file at ``path``)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save({"format": CHECKPOINT_FORMAT, "config": config.to_dict(), "model": model.state_dict(), **(extra or {})}, tmp)
-    os.replace(tmp, path)
+    atomic_torch_save({"format": CHECKPOINT_FORMAT, "config": config.to_dict(), "model": model.state_dict(),
+                       **(extra or {})}, path)
 
 
 def read_segmenter_checkpoint(path: str | Path) -> dict[str, Any]:
@@ -197,14 +195,6 @@ def read_segmenter_checkpoint(path: str | Path) -> dict[str, Any]:
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointFormatError(f"{path}: not an RGB-D segmenter checkpoint (format {CHECKPOINT_FORMAT!r})")
     return state
-
-
-def is_segmenter_checkpoint(path: str | Path) -> bool:
-    try:
-        read_segmenter_checkpoint(path)
-    except (CheckpointFormatError, FileNotFoundError):
-        return False
-    return True
 
 
 def load_segmenter(path: str | Path, threads: int | None = None, **overrides: Any) -> RGBDSegmenter:

@@ -8,9 +8,6 @@ point resumes from its last finished epoch with ``resume=True``.
 
 from __future__ import annotations
 
-import csv
-import math
-import os
 import sys
 import time
 from dataclasses import asdict
@@ -31,15 +28,7 @@ from perception.detection.maskrcnn import (
 )
 from perception.detection.maskrcnn_config import DetectorTrainConfig
 from perception.errors import PerceptionConfigError
-
-
-def _write_log(path: Path, rows: list[dict[str, Any]]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, path)
+from perception.run_files import learning_rate, write_log_csv
 
 
 def train_detector(root: str | Path, out: str | Path, config: DetectorConfig | None = None,
@@ -117,16 +106,10 @@ def train_detector(root: str | Path, out: str | Path, config: DetectorConfig | N
             save_detector(out / "best.pt", model, config, extra)
         save_detector(last, model, config, {**extra, "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
                                             "best_ap": best_ap, "rng": torch.get_rng_state()})
-        _write_log(out / "log.csv", log)
+        write_log_csv(out / "log.csv", log)
         if progress:
             print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), file=sys.stderr)
     return log
-
-
-def learning_rate(train: DetectorTrainConfig, iteration: int, total: int) -> float:
-    """Linear warm-up over ``warmup_iters``, then cosine decay to zero at ``total`` iterations."""
-    warmup = min(1.0, (iteration + 1) / max(train.warmup_iters, 1))
-    return train.lr * warmup * 0.5 * (1.0 + math.cos(math.pi * min(iteration / max(total, 1), 1.0)))
 
 
 def _has_split(root: str | Path, split: str | None) -> bool:

@@ -9,9 +9,6 @@ the centre heat (Zhou et al., "Objects as Points", 2019), L1 on the offsets.
 
 from __future__ import annotations
 
-import csv
-import math
-import os
 import sys
 import time
 from dataclasses import asdict
@@ -31,6 +28,7 @@ from perception.detection.rgbd_segmenter import (
 from perception.detection.segmenter_config import SegmenterConfig, SegmenterTrainConfig
 from perception.detection.segmenter_data import SegmenterDataset, scene_folders
 from perception.errors import PerceptionConfigError
+from perception.run_files import learning_rate, write_log_csv
 
 
 def focal_centre_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -49,21 +47,6 @@ def segmenter_losses(heads: torch.Tensor, mushroom: torch.Tensor, mask_weight: t
     centre_loss = focal_centre_loss(heads[:, 1], centre)
     off = (F.l1_loss(heads[:, 2:], offset, reduction="none").sum(1) * offset_weight).sum() / offset_weight.sum().clamp(min=1)
     return {"mask": mask, "centre": centre_loss, "offset": off}
-
-
-def learning_rate(train: SegmenterTrainConfig, iteration: int, total: int) -> float:
-    warmup = min(1.0, (iteration + 1) / max(train.warmup_iters, 1))
-    return train.lr * warmup * 0.5 * (1.0 + math.cos(math.pi * min(iteration / max(total, 1), 1.0)))
-
-
-def _write_log(path: Path, rows: list[dict[str, Any]]) -> None:
-    fields = sorted({k for r in rows for k in r}, key=lambda k: (k != "epoch", k))
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, path)
 
 
 def validate(segmenter: RGBDSegmenter, roots: list[str | Path], max_images: int) -> dict[str, float]:
@@ -146,7 +129,7 @@ def train_segmenter(roots: list[str | Path], out: str | Path, config: SegmenterC
             save_segmenter(out / "best.pt", model, config, extra)
         save_segmenter(last, model, config, {**extra, "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
                                              "best_f1": best, "rng": torch.get_rng_state()})
-        _write_log(out / "log.csv", log)
+        write_log_csv(out / "log.csv", log)
         if progress:
             print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), file=sys.stderr)
     if not (out / "best.pt").is_file():  # no validation split: the last epoch is the best known

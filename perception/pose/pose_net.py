@@ -11,8 +11,6 @@ network is always rebuilt with the shape it was trained with.
 from __future__ import annotations
 
 import dataclasses
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +21,7 @@ from perception.errors import CheckpointFormatError, CheckpointMismatchError
 from perception.pose import rotations as rot
 from perception.pose.backbones import build_backbone
 from perception.pose.config import PoseNetConfig
+from perception.run_files import atomic_torch_save
 
 CHECKPOINT_FORMAT = "sms3d-posenet"
 CHECKPOINT_VERSION = 1
@@ -72,22 +71,6 @@ def save_checkpoint(path: str | Path, model: PoseNet, extra: dict[str, Any] | No
         "extra": extra or {},
     }
     atomic_torch_save(payload, path)
-
-
-def atomic_torch_save(obj: Any, path: str | Path) -> None:
-    """``torch.save`` to a temporary file in the same folder, then ``os.replace`` it into place."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    os.close(fd)
-    try:
-        torch.save(obj, tmp)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; checkpoints are ordinary files
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
 
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:

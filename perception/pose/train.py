@@ -26,12 +26,12 @@ from perception.pose.metrics import PoseMetrics, errors_deg, summarize
 from perception.pose.pose_net import (
     PoseNet,
     PoseNetConfig,
-    atomic_torch_save,
     load_backbone,
     load_checkpoint,
     save_checkpoint,
 )
 from perception.pose.rotations import rotation_loss
+from perception.run_files import atomic_torch_save
 
 CSV_FIELDS = (
     "epoch", "lr", "train_loss", "val_loss", "val_mean_geodesic_deg", "val_median_geodesic_deg",

@@ -71,7 +71,7 @@ def test_augmented_offsets_still_point_at_their_instance_centre(beds):
         assert torch.all(mushroom[vs, us] == 1)
 
 
-def test_training_learns_and_resumes(beds, tmp_path):
+def test_training_resumes_from_its_last_epoch_and_refuses_another_network(beds, tmp_path):
     train = SegmenterTrainConfig(epochs=2, batch_size=2, crop=64, lr=3e-3, warmup_iters=1, val_every=1, max_val_images=1)
     log = train_segmenter([beds], tmp_path / "run", SegmenterConfig(widths=(8, 8, 16, 16, 16)), train, progress=False)
     assert [r["epoch"] for r in log] == [1, 2] and "val_mask_f1" in log[-1]
