@@ -16,6 +16,7 @@ from sms3d_env.training.config import (
     TrainConfig,
 )
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
+from sms3d_env.training.imitation import TEACHERS
 from sms3d_env.training.rl import train_policy
 
 
@@ -50,7 +51,8 @@ def _cmd_train_bc(args: Any) -> int:
 
     try:
         cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
-                       pose_error_deg=args.pose_error_deg, seed=args.seed, out=args.out,
+                       pose_error_deg=args.pose_error_deg, pose_error_range_deg=args.pose_error_range,
+                       teacher=args.teacher, seed=args.seed, out=args.out,
                        num_mushrooms=tuple(args.demo_mushrooms), dagger_rounds=args.dagger_rounds,
                        dagger_episodes=args.dagger_episodes)
     except ValueError as e:
@@ -120,6 +122,9 @@ def register(subparsers: Any) -> None:
     bc.add_argument("--epochs", type=int, default=40, help="epochs of the first clone")
     bc.add_argument("--dagger-rounds", type=int, default=3, help="DAgger rounds after it (0: plain BC)")
     bc.add_argument("--dagger-episodes", type=int, default=150, help="episodes per DAgger round")
+    bc.add_argument("--teacher", choices=TEACHERS, default="estimate",
+                    help="estimate: the scripted picker labels from the observed pose; truth: from "
+                         "the true pose (a privileged teacher under --pose-error-deg/--pose-error-range)")
     p.set_defaults(func=_cmd_train)
 
     e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "

@@ -2,6 +2,12 @@
 stable-baselines3 policy (PPO's ``MultiInputPolicy``, so that ``PPO.load`` and RL fine-tuning
 take it as it is).
 
+Under pose error the teacher can be *privileged* (``teacher="truth"``, Chen et al. 2019,
+"Learning by Cheating"): the scripted picker labels every state from the true target pose while
+the clone sees only the estimate, wrist wrench and the rest of the observation, so the clone
+learns what the estimate and the contact feedback say about the true pose instead of copying a
+picker that trusts the estimate.
+
 Demonstrations are collected DART-style (Laskey et al. 2017, "DART: Noise Injection for Robust
 Imitation Learning"): the scripted picker acts with Gaussian noise added to its twist command and
 every visited state is labelled with the picker's *clean* action, so the clone sees (and learns to
@@ -25,6 +31,7 @@ from typing import Any
 import numpy as np
 
 TRAIN_ENV_ID = "SMS3DPickTrain-v0"
+TEACHERS = ("estimate", "truth")
 
 
 @dataclass(frozen=True)
@@ -38,6 +45,11 @@ class BCConfig:
         action_noise: standard deviation of the Gaussian noise on the six normalised twist
             commands while collecting (DART); the suction command is left clean.
         pose_error_deg: the noisy pose source's rotation error while collecting (0: oracle).
+        pose_error_range_deg: ``(low, high)``: a rotation error drawn per episode in this range
+            instead (excludes ``pose_error_deg``).
+        teacher: ``"estimate"``: the picker acts and labels from the observed (estimated) pose,
+            as it would on a robot; ``"truth"``: from the true target pose (a privileged teacher,
+            used only while training; the clone still sees only the observation).
         epochs, batch_size, learning_rate, net_arch: the regression of the policy's mean action
             onto the picker's clean actions (mean squared error, Adam).
         log_std: the Gaussian policy's log standard deviation after cloning (exploration of an
@@ -54,6 +66,8 @@ class BCConfig:
     num_mushrooms: tuple[int, ...] = (10, 25)
     action_noise: float = 0.2
     pose_error_deg: float = 0.0
+    pose_error_range_deg: tuple[float, float] | None = None
+    teacher: str = "estimate"
     epochs: int = 40
     batch_size: int = 512
     learning_rate: float = 1e-3
@@ -90,6 +104,15 @@ class BCConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
                 raise bad(name, "must be a finite number >= 0")
+        if self.pose_error_range_deg is not None:
+            low_high = tuple(float(v) for v in self.pose_error_range_deg)
+            if len(low_high) != 2 or not (0 <= low_high[0] <= low_high[1] <= 180):
+                raise bad("pose_error_range_deg", "must be (low, high) with 0 <= low <= high <= 180")
+            if self.pose_error_deg > 0:
+                raise bad("pose_error_range_deg", "excludes pose_error_deg > 0")
+            object.__setattr__(self, "pose_error_range_deg", low_high)
+        if self.teacher not in TEACHERS:
+            raise bad("teacher", f"must be one of {TEACHERS}")
         if not (isinstance(self.learning_rate, (int, float)) and 0 < self.learning_rate < 1):
             raise bad("learning_rate", "must be in (0, 1)")
         if not (isinstance(self.log_std, (int, float)) and math.isfinite(self.log_std)):
@@ -101,7 +124,9 @@ class BCConfig:
         """What the demonstrations depend on (a saved ``demos.npz`` is reused only if equal)."""
         return {"episodes": self.episodes, "num_mushrooms": list(self.num_mushrooms),
                 "action_noise": self.action_noise, "pose_error_deg": self.pose_error_deg,
-                "seed": self.seed, "env_id": TRAIN_ENV_ID}
+                "seed": self.seed, "env_id": TRAIN_ENV_ID,
+                **({} if self.pose_error_range_deg is None and self.teacher == "estimate" else
+                   {"pose_error_range_deg": self.pose_error_range_deg, "teacher": self.teacher})}
 
     def dagger_settings(self, round_: int) -> dict[str, Any]:
         """What DAgger round ``round_``'s data depend on (everything before it, too)."""
@@ -111,15 +136,29 @@ class BCConfig:
                 "dagger_epochs": self.dagger_epochs}
 
 
-def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0) -> dict[str, Any]:
-    """``gym.make(TRAIN_ENV_ID, **kwargs)`` arguments for a bed size and pose error."""
+def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
+                     pose_error_range_deg: tuple[float, float] | None = None) -> dict[str, Any]:
+    """``gym.make(TRAIN_ENV_ID, **kwargs)`` arguments for a bed size and pose error (fixed, or
+    drawn per episode in ``pose_error_range_deg``)."""
     import generator
 
     kw: dict[str, Any] = {"scene_config": generator.SceneConfig().replace(
         placement__num_mushrooms=int(num_mushrooms))}
-    if pose_error_deg > 0:
+    if pose_error_range_deg is not None:
+        from sms3d_env.pose_sources import UniformNoisyPose
+
+        kw.update(pose_source=UniformNoisyPose(*pose_error_range_deg))
+    elif pose_error_deg > 0:
         kw.update(pose_source="noisy", pose_error_deg=float(pose_error_deg))
     return kw
+
+
+def with_true_target(env: Any, obs: dict[str, np.ndarray], target: int) -> dict[str, np.ndarray]:
+    """``obs`` with the target's true cap top and stem axis in ``target_pose`` (what a privileged
+    teacher reads; the scripted picker reads nothing that depends on the estimate besides it)."""
+    inst = env.unwrapped.scene.instances[target]
+    return {**obs, "target_pose": np.concatenate([np.asarray(inst.cap_top, float),
+                                                  np.asarray(inst.rotation, float)[:, 2]])}
 
 
 def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
@@ -137,7 +176,8 @@ def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
     import sms3d_env  # noqa: F401  (registers the env ids)
     from sms3d_env.pickers.scripted import ScriptedPicker
 
-    envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg)) for n in cfg.num_mushrooms]
+    envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg, cfg.pose_error_range_deg))
+            for n in cfg.num_mushrooms]
     rng = np.random.default_rng([cfg.seed, seeds.start])
     obs_rows: dict[str, list[np.ndarray]] = {}
     actions: list[np.ndarray] = []
@@ -149,11 +189,12 @@ def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
             env = envs[i % len(envs)]
             picker = ScriptedPicker.for_env(env)
             expert_acts = actor is None or rng.random() < beta
-            obs, _ = env.reset(seed=seed)
+            obs, info = env.reset(seed=seed)
             ep_obs, ep_act = [], []
             done, sealed = False, False
             while not done:
-                clean = picker(obs)
+                clean = picker(obs if cfg.teacher == "estimate" else
+                               with_true_target(env, obs, info["target"]))
                 sealed |= bool(obs["suction"][1] > 0.5)
                 if expert_acts:
                     act = clean.copy()

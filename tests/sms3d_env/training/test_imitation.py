@@ -1,0 +1,89 @@
+"""The imitation recipe's options: a pose error drawn per episode, and the privileged teacher that
+labels every state from the true pose while the clone sees only the estimate."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import sms3d_env  # noqa: F401  (registers the env ids)
+from sms3d_env.pickers.scripted import ScriptedPicker
+from sms3d_env.pose_sources import UniformNoisyPose
+from sms3d_env.training.imitation import (
+    TRAIN_ENV_ID,
+    BCConfig,
+    _rollouts,
+    train_env_kwargs,
+    with_true_target,
+)
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    cos = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+def test_with_true_target_replaces_only_the_estimate():
+    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
+    try:
+        obs, info = env.reset(seed=3)
+        teacher = with_true_target(env, obs, info["target"])
+        inst = env.unwrapped.scene.instances[info["target"]]
+        np.testing.assert_allclose(teacher["target_pose"][:3], inst.cap_top)
+        np.testing.assert_allclose(teacher["target_pose"][3:], np.asarray(inst.rotation)[:, 2])
+        assert _angle_deg(obs["target_pose"][3:], teacher["target_pose"][3:]) == pytest.approx(30.0, abs=1e-6)
+        assert all(np.array_equal(obs[k], teacher[k]) for k in obs if k != "target_pose")
+    finally:
+        env.close()
+
+
+def test_the_pose_error_range_draws_a_uniform_noisy_source():
+    kw = train_env_kwargs(8, pose_error_range_deg=(5.0, 25.0))
+    assert isinstance(kw["pose_source"], UniformNoisyPose)
+    assert (kw["pose_source"].low_deg, kw["pose_source"].high_deg) == (5.0, 25.0)
+    assert "pose_source" not in train_env_kwargs(8)
+
+
+@pytest.mark.parametrize("teacher", ["estimate", "truth"])
+def test_each_teacher_labels_from_its_own_pose(teacher):
+    """The learner (here: standing still) acts, the teacher labels; the first label turns the cup
+    onto the pose the teacher reads: the estimate, or the truth 30 degrees from it."""
+    cfg = BCConfig(episodes=1, num_mushrooms=(8,), pose_error_deg=30.0, teacher=teacher, out="unused")
+    demos = _rollouts(cfg, range(3, 4), actor=lambda obs: np.zeros(7, np.float32), beta=0.0, progress=False)
+    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
+    try:
+        obs, info = env.reset(seed=3)
+        np.testing.assert_allclose(demos["target_pose"][0], obs["target_pose"])  # the clone sees the estimate
+        read = obs if teacher == "estimate" else with_true_target(env, obs, info["target"])
+        np.testing.assert_allclose(demos["actions"][0], ScriptedPicker.for_env(env)(read), atol=1e-6)
+        other = with_true_target(env, obs, info["target"]) if teacher == "estimate" else obs
+        assert not np.allclose(demos["actions"][0][3:6], ScriptedPicker.for_env(env)(other)[3:6], atol=1e-3)
+    finally:
+        env.close()
+
+
+@settings(max_examples=40, deadline=None)
+@given(low=st.floats(-10, 200, allow_nan=False), high=st.floats(-10, 200, allow_nan=False))
+def test_bad_pose_error_ranges_are_refused_by_name(low, high):
+    if 0 <= low <= high <= 180:
+        assert BCConfig(pose_error_range_deg=(low, high)).pose_error_range_deg == (low, high)
+    else:
+        with pytest.raises(ValueError, match="pose_error_range_deg"):
+            BCConfig(pose_error_range_deg=(low, high))
+
+
+def test_a_fixed_error_and_a_range_exclude_each_other_and_teachers_are_named():
+    with pytest.raises(ValueError, match="pose_error_range_deg"):
+        BCConfig(pose_error_deg=10.0, pose_error_range_deg=(0.0, 30.0))
+    with pytest.raises(ValueError, match="teacher"):
+        BCConfig(teacher="oracle")
+
+
+def test_the_privileged_settings_change_what_demonstrations_are_reused_for():
+    plain = BCConfig(pose_error_deg=10.0)
+    assert plain.demo_settings() == BCConfig(pose_error_deg=10.0, teacher="estimate").demo_settings()
+    assert BCConfig(pose_error_deg=10.0, teacher="truth").demo_settings() != plain.demo_settings()
+    assert BCConfig(pose_error_range_deg=(0, 30)).demo_settings() != BCConfig().demo_settings()
