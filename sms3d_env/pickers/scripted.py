@@ -59,6 +59,9 @@ class ScriptedPicker:
         pull_speed: slight withdrawal along the axis while twisting (m/s).
         lift_speed, lift_ramp_steps: lift speed (m/s), reached linearly over this many steps.
         settle_steps: still steps after the seal forms (the arm stops pressing).
+        approach_tolerance, approach_tolerance_deg: how close to the stand-off point (m) and
+            how well aligned with the estimated axis (deg) the approach must end before the
+            descent starts (the descent keeps aligning and pulling onto the axis).
     """
 
     approach_command = -1.0  # tool command on the way in (suction off)
@@ -68,12 +71,14 @@ class ScriptedPicker:
                  control_dt: float = 0.04, standoff: float = 0.03, stem_height: float = 0.04,
                  descend_speed: float = 0.02, twist_rate: float = 0.8, bend_rate: float = 0.0,
                  twist_steps: int = 30, pull_speed: float = 0.002, settle_steps: int = 2,
-                 lift_speed: float = 0.06, lift_ramp_steps: int = 5) -> None:
+                 lift_speed: float = 0.06, lift_ramp_steps: int = 5, approach_tolerance: float = 0.003,
+                 approach_tolerance_deg: float = 3.0) -> None:
         self.vmax, self.wmax, self.dt = max_linear_speed, max_angular_speed, control_dt
         self.standoff, self.stem_height = standoff, stem_height
         self.descend_speed, self.bend_rate, self.twist_rate = descend_speed, bend_rate, twist_rate
         self.twist_steps, self.pull_speed, self.settle_steps = twist_steps, pull_speed, settle_steps
         self.lift_speed, self.lift_ramp_steps = lift_speed, lift_ramp_steps
+        self.approach_tolerance, self.approach_tolerance_deg = approach_tolerance, approach_tolerance_deg
         self.reset()
 
     @classmethod
@@ -111,7 +116,7 @@ class ScriptedPicker:
     def _approach(self, o: _View) -> np.ndarray:
         err = self._approach_goal(o) - o.p
         ang = np.degrees(np.arccos(np.clip(o.z @ -o.axis, -1, 1)))
-        if np.linalg.norm(err) < 0.003 and ang < 3.0:
+        if np.linalg.norm(err) < self.approach_tolerance and ang < self.approach_tolerance_deg:
             self.phase = "descend"
         # Proportional, at least 2 cm/s until the tolerance (no slow creep near the goal).
         n_err = np.linalg.norm(err)
