@@ -59,9 +59,6 @@ class ScriptedPicker:
         pull_speed: slight withdrawal along the axis while twisting (m/s).
         lift_speed, lift_ramp_steps: lift speed (m/s), reached linearly over this many steps.
         settle_steps: still steps after the seal forms (the arm stops pressing).
-        approach_tolerance, approach_tolerance_deg: how close to the stand-off point (m) and
-            how well aligned with the estimated axis (deg) the approach must end before the
-            descent starts (the descent keeps aligning and pulling onto the axis).
     """
 
     approach_command = -1.0  # tool command on the way in (suction off)
@@ -71,14 +68,12 @@ class ScriptedPicker:
                  control_dt: float = 0.04, standoff: float = 0.03, stem_height: float = 0.04,
                  descend_speed: float = 0.02, twist_rate: float = 0.8, bend_rate: float = 0.0,
                  twist_steps: int = 30, pull_speed: float = 0.002, settle_steps: int = 2,
-                 lift_speed: float = 0.06, lift_ramp_steps: int = 5, approach_tolerance: float = 0.003,
-                 approach_tolerance_deg: float = 3.0) -> None:
+                 lift_speed: float = 0.06, lift_ramp_steps: int = 5) -> None:
         self.vmax, self.wmax, self.dt = max_linear_speed, max_angular_speed, control_dt
         self.standoff, self.stem_height = standoff, stem_height
         self.descend_speed, self.bend_rate, self.twist_rate = descend_speed, bend_rate, twist_rate
         self.twist_steps, self.pull_speed, self.settle_steps = twist_steps, pull_speed, settle_steps
         self.lift_speed, self.lift_ramp_steps = lift_speed, lift_ramp_steps
-        self.approach_tolerance, self.approach_tolerance_deg = approach_tolerance, approach_tolerance_deg
         self.reset()
 
     @classmethod
@@ -102,12 +97,16 @@ class ScriptedPicker:
         """Where the approach ends (the tool site): the stand-off point above the cap top."""
         return o.c + o.axis * self.standoff
 
-    def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+    @staticmethod
+    def view(obs: dict[str, np.ndarray]) -> _View:
+        """What the phases read from ``obs`` (the pose is ``obs["target_pose"]``)."""
         axis = obs["target_pose"][3:]
-        o = _View(p=obs["tool_pose"][:3], z=_tool_axis(obs["tool_pose"][3:]),
-                  c=obs["target_pose"][:3], axis=axis / np.linalg.norm(axis),
-                  held=bool(obs["suction"][1] > 0.5))
-        return getattr(self, "_" + self.phase)(o)
+        return _View(p=obs["tool_pose"][:3], z=_tool_axis(obs["tool_pose"][3:]),
+                     c=obs["target_pose"][:3], axis=axis / np.linalg.norm(axis),
+                     held=bool(obs["suction"][1] > 0.5))
+
+    def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        return getattr(self, "_" + self.phase)(self.view(obs))
 
     def _align(self, o: _View) -> np.ndarray:
         """Angular velocity turning the tool axis onto the estimated stem axis (facing down it)."""
@@ -116,7 +115,7 @@ class ScriptedPicker:
     def _approach(self, o: _View) -> np.ndarray:
         err = self._approach_goal(o) - o.p
         ang = np.degrees(np.arccos(np.clip(o.z @ -o.axis, -1, 1)))
-        if np.linalg.norm(err) < self.approach_tolerance and ang < self.approach_tolerance_deg:
+        if np.linalg.norm(err) < 0.003 and ang < 3.0:
             self.phase = "descend"
         # Proportional, at least 2 cm/s until the tolerance (no slow creep near the goal).
         n_err = np.linalg.norm(err)
@@ -149,6 +148,10 @@ class ScriptedPicker:
         self.count += 1
         if self.count >= self.twist_steps:
             self.phase = "lift"
+        return self._action(*self._twist_velocity(o), self.hold_command)
+
+    def _twist_velocity(self, o: _View) -> tuple[np.ndarray, np.ndarray]:
+        """(linear, angular) velocity of the twist about ``o``'s axis, with the pull and bend."""
         w = self.twist_rate * o.axis
         v = self.pull_speed * o.axis
         if self.bend_rate > 0:
@@ -160,7 +163,7 @@ class ScriptedPicker:
             wb = self.bend_rate * bend_axis
             w = w + wb
             v = v + np.cross(wb, o.p - (o.c - o.axis * self.stem_height))
-        return self._action(v, w, self.hold_command)
+        return v, w
 
     def _lift(self, o: _View) -> np.ndarray:
         # Straight up, the speed ramped up over ``lift_ramp_steps`` (no jerk on the grip).

@@ -2,11 +2,12 @@
 stable-baselines3 policy (PPO's ``MultiInputPolicy``, so that ``PPO.load`` and RL fine-tuning
 take it as it is).
 
-Under pose error the teacher can be *privileged* (``teacher="truth"``, Chen et al. 2019,
-"Learning by Cheating"): the scripted picker labels every state from the true target pose while
-the clone sees only the estimate, wrist wrench and the rest of the observation, so the clone
-learns what the estimate and the contact feedback say about the true pose instead of copying a
-picker that trusts the estimate.
+Under pose error the teacher can be *privileged* (``teacher="truth"``, after Chen et al. 2019,
+"Learning by Cheating"): :class:`~sms3d_env.pickers.privileged.PrivilegedTeacher` decides its
+phases on the observation as the scripted picker does, but descends and twists along the true
+stem axis, while the clone sees only the estimate, the wrist wrench and the rest of the
+observation; the clone learns what those say about the true pose instead of copying a picker that
+trusts the estimate.
 
 Demonstrations are collected DART-style (Laskey et al. 2017, "DART: Noise Injection for Robust
 Imitation Learning"): the scripted picker acts with Gaussian noise added to its twist command and
@@ -32,11 +33,6 @@ import numpy as np
 
 TRAIN_ENV_ID = "SMS3DPickTrain-v0"
 TEACHERS = ("estimate", "truth")
-# The privileged teacher starts its descent from a looser stand-off (m, deg) than the picker's
-# own 3 mm / 3 deg: the clone, which cannot see the true pose, never parks within 3 mm of the true
-# stand-off point, so a strict teacher labels its states "keep approaching" forever (measured: a
-# clone that never sealed, 1/100 at 0 deg). The descent itself keeps aligning with the true axis.
-PRIVILEGED_APPROACH_TOLERANCE = (0.008, 10.0)
 
 
 @dataclass(frozen=True)
@@ -52,9 +48,10 @@ class BCConfig:
         pose_error_deg: the noisy pose source's rotation error while collecting (0: oracle).
         pose_error_range_deg: ``(low, high)``: a rotation error drawn per episode in this range
             instead (excludes ``pose_error_deg``).
-        teacher: ``"estimate"``: the picker acts and labels from the observed (estimated) pose,
-            as it would on a robot; ``"truth"``: from the true target pose (a privileged teacher,
-            used only while training; the clone still sees only the observation).
+        teacher: ``"estimate"``: the scripted picker acts and labels from the observed
+            (estimated) pose, as it would on a robot; ``"truth"``: the privileged teacher, whose
+            descent and twist follow the true pose (used only while training; the clone still
+            sees only the observation).
         epochs, batch_size, learning_rate, net_arch: the regression of the policy's mean action
             onto the picker's clean actions (mean squared error, Adam).
         log_std: the Gaussian policy's log standard deviation after cloning (exploration of an
@@ -131,8 +128,7 @@ class BCConfig:
                 "action_noise": self.action_noise, "pose_error_deg": self.pose_error_deg,
                 "seed": self.seed, "env_id": TRAIN_ENV_ID,
                 **({} if self.pose_error_range_deg is None and self.teacher == "estimate" else
-                   {"pose_error_range_deg": self.pose_error_range_deg, "teacher": self.teacher,
-                    "privileged_approach_tolerance": list(PRIVILEGED_APPROACH_TOLERANCE)})}
+                   {"pose_error_range_deg": self.pose_error_range_deg, "teacher": self.teacher})}
 
     def dagger_settings(self, round_: int) -> dict[str, Any]:
         """What DAgger round ``round_``'s data depend on (everything before it, too)."""
@@ -180,13 +176,12 @@ def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
     from tqdm import tqdm
 
     import sms3d_env  # noqa: F401  (registers the env ids)
+    from sms3d_env.pickers.privileged import PrivilegedTeacher
     from sms3d_env.pickers.scripted import ScriptedPicker
 
     envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg, cfg.pose_error_range_deg))
             for n in cfg.num_mushrooms]
     rng = np.random.default_rng([cfg.seed, seeds.start])
-    teacher_kwargs = {} if cfg.teacher == "estimate" else dict(zip(
-        ("approach_tolerance", "approach_tolerance_deg"), PRIVILEGED_APPROACH_TOLERANCE, strict=True))
     obs_rows: dict[str, list[np.ndarray]] = {}
     actions: list[np.ndarray] = []
     episode: list[int] = []
@@ -195,14 +190,14 @@ def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
     try:
         for i, seed in enumerate(bar):
             env = envs[i % len(envs)]
-            picker = ScriptedPicker.for_env(env, **teacher_kwargs)
+            picker = ScriptedPicker.for_env(env) if cfg.teacher == "estimate" else PrivilegedTeacher(env)
             expert_acts = actor is None or rng.random() < beta
             obs, info = env.reset(seed=seed)
             ep_obs, ep_act = [], []
             done, sealed = False, False
             while not done:
-                clean = picker(obs if cfg.teacher == "estimate" else
-                               with_true_target(env, obs, info["target"]))
+                clean = (picker(obs) if cfg.teacher == "estimate" else
+                         picker(obs, with_true_target(env, obs, info["target"])))
                 sealed |= bool(obs["suction"][1] > 0.5)
                 if expert_acts:
                     act = clean.copy()

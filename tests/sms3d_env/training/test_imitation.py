@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import sms3d_env  # noqa: F401  (registers the env ids)
+from sms3d_env.pickers.privileged import PrivilegedTeacher
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.pose_sources import UniformNoisyPose
 from sms3d_env.training.imitation import (
@@ -48,19 +49,44 @@ def test_the_pose_error_range_draws_a_uniform_noisy_source():
 
 
 @pytest.mark.parametrize("teacher", ["estimate", "truth"])
-def test_each_teacher_labels_from_its_own_pose(teacher):
-    """The learner (here: standing still) acts, the teacher labels; the first label turns the cup
-    onto the pose the teacher reads: the estimate, or the truth 30 degrees from it."""
+def test_the_clone_sees_the_estimate_and_the_approach_is_labelled_from_it(teacher):
+    """The learner (here: standing still) acts, the teacher labels; both teachers approach the
+    *estimated* stand-off point (a switch the clone can see), and the clone sees the estimate."""
     cfg = BCConfig(episodes=1, num_mushrooms=(8,), pose_error_deg=30.0, teacher=teacher, out="unused")
     demos = _rollouts(cfg, range(3, 4), actor=lambda obs: np.zeros(7, np.float32), beta=0.0, progress=False)
     env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
     try:
+        obs, _ = env.reset(seed=3)
+        np.testing.assert_allclose(demos["target_pose"][0], obs["target_pose"])
+        np.testing.assert_allclose(demos["actions"][0], ScriptedPicker.for_env(env)(obs), atol=1e-6)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("phase", ["descend", "twist"])
+def test_the_privileged_teacher_descends_and_twists_along_the_true_axis(phase):
+    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
+    try:
         obs, info = env.reset(seed=3)
-        np.testing.assert_allclose(demos["target_pose"][0], obs["target_pose"])  # the clone sees the estimate
-        read = obs if teacher == "estimate" else with_true_target(env, obs, info["target"])
-        np.testing.assert_allclose(demos["actions"][0], ScriptedPicker.for_env(env)(read), atol=1e-6)
-        other = with_true_target(env, obs, info["target"]) if teacher == "estimate" else obs
-        assert not np.allclose(demos["actions"][0][3:6], ScriptedPicker.for_env(env)(other)[3:6], atol=1e-3)
+        truth = with_true_target(env, obs, info["target"])
+        teacher = PrivilegedTeacher(env)
+        teacher.picker.phase = phase
+        label = teacher(obs, truth)
+        assert teacher.phase == phase  # the phase machine ran on the observation
+        on_truth, on_estimate = ScriptedPicker.for_env(env), ScriptedPicker.for_env(env)
+        on_truth.phase = on_estimate.phase = phase
+        np.testing.assert_allclose(label, on_truth(truth), atol=1e-6)
+        assert not np.allclose(label[:6], on_estimate(obs)[:6], atol=1e-3)
+        assert label[6] == ScriptedPicker.hold_command
+    finally:
+        env.close()
+
+
+def test_the_privileged_teacher_refuses_the_hand():
+    env = gym.make("SMS3DPick-v0", tool="hand")
+    try:
+        with pytest.raises(ValueError, match="suction"):
+            PrivilegedTeacher(env)
     finally:
         env.close()
 
