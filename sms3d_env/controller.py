@@ -105,6 +105,12 @@ class IKController:
             home[self.arm_qadr] = q_home
         self.posture_task.set_target(home)
 
+    def set_posture(self, q_arm: np.ndarray) -> None:
+        """Move the posture target (the null-space pull) to ``q_arm``; the command stays."""
+        home = self.posture_task.target_q.copy() if self.posture_task.target_q is not None else self.model.qpos0.copy()
+        home[self.arm_qadr] = q_arm
+        self.posture_task.set_target(home)
+
     def _solve(self, target: mink.SE3, dt: float) -> np.ndarray:
         self.frame_task.set_target(target)
         v = mink.solve_ik(self.configuration, self.tasks, dt, "daqp", damping=self.cfg.damping,

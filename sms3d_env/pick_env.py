@@ -24,7 +24,7 @@ from gymnasium import spaces
 
 from generator.gl import open_renderer
 from sms3d_env.controller import ControllerConfig, IKController
-from sms3d_env.env_args import RENDER_MODES, SUCTION_MODES, check_env_args
+from sms3d_env.env_args import POSTURE_TARGETS, RENDER_MODES, SUCTION_MODES, check_env_args
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
 from sms3d_env.pose_sources import PoseSource, make_pose_source
@@ -35,9 +35,12 @@ from sms3d_env.targets import Reachability, select_target
 from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
 from sms3d_env.world import World, build_world
 
-__all__ = ["FAILURE_CAUSES", "SUCTION_MODES", "SMS3DPickEnv"]
+__all__ = ["FAILURE_CAUSES", "POSTURE_TARGETS", "SUCTION_MODES", "SMS3DPickEnv"]
 
 _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
+# posture_target="tool": the posture target is solved again once the tool axis has turned this
+# far from the axis it was solved for (an IK solve costs milliseconds; most steps need none).
+_POSTURE_RESOLVE_DEG = 5.0
 # State observation entries and their sizes, in the order of the flat vector they are cut from.
 _OBS_SIZES = {"joint_pos": 6, "joint_vel": 6, "tool_pose": 7, "suction": 3, "target_pose": 6,
               "target_rel": 3}
@@ -128,6 +131,10 @@ class SMS3DPickEnv(gym.Env):
         scene_pool, pool_seed: > 0: draw each reset's bed from a pool of this many
             ``scene_config`` beds (seeds ``pool_seed ..``, each generated on first use and kept,
             its compiled model cached per target) instead of generating a new one.
+        posture_target: the IK's null-space posture: ``"estimate"`` (default) a pre-grasp
+            configuration solved once per episode for the *estimated* axis; ``"tool"`` solved
+            again whenever the tool axis turns more than 5 deg away from the axis of the last
+            solve, so a picker that corrects a wrong estimate is not pulled back towards it.
 
     ``SMS3DPickTrain-v0`` sets the training options: ``suction_mode="latched"``,
     ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
@@ -164,6 +171,7 @@ class SMS3DPickEnv(gym.Env):
         horizon: int = 250,
         scene_pool: int = 0,
         pool_seed: int = 0,
+        posture_target: str = "estimate",
     ) -> None:
         self.robot_cfg = robot or RobotConfig()
         check_env_args(render_mode=render_mode, reward_type=reward_type, control_dt=control_dt,
@@ -172,7 +180,7 @@ class SMS3DPickEnv(gym.Env):
                        pose_source=pose_source, pose_error_deg=pose_error_deg,
                        position_noise=position_noise, target_rule=target_rule, image_size=image_size,
                        render_size=render_size, max_tilt_deg=max_tilt_deg, free_radius=free_radius,
-                       scene_config=scene_config)
+                       scene_config=scene_config, posture_target=posture_target)
         if tool is not None:
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
@@ -190,6 +198,8 @@ class SMS3DPickEnv(gym.Env):
         self.free_radius = free_radius
         self.suction_mode, self.end_on_dead_end = suction_mode, bool(end_on_dead_end)
         self.task_obs, self.horizon = bool(task_obs), horizon
+        self.posture_target = posture_target
+        self._posture_axis = np.zeros(3)  # the tool axis the posture target was solved for
 
         self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
         self.home_q = np.asarray(self.robot_cfg.home_q, float)
@@ -254,6 +264,7 @@ class SMS3DPickEnv(gym.Env):
         # let the differential IK stall there, centimetres short of some pre-grasp poses.
         q_pre = self.reach.solve(estimate.cap_top, estimate.stem_axis, (0.05, 0.03))
         self.ik.reset(self.home_q, self.home_q if q_pre is None else q_pre)
+        self._posture_axis = -estimate.stem_axis / np.linalg.norm(estimate.stem_axis)
         mujoco.mj_forward(m, d)
         for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
             mujoco.mj_step(m, d)
@@ -275,6 +286,8 @@ class SMS3DPickEnv(gym.Env):
             warnings.warn("step() called after the episode ended (terminated or truncated); call "
                           "reset(). The episode stays ended.", stacklevel=2)
         picking.begin_step(float(a[6]))  # the tool's command (suction: the valve; hand: fingers)
+        if self.posture_target == "tool":
+            self._follow_tool_posture()
         try:
             d.ctrl[:6] = self.ik.step(a[:6] * self._twist_scale, d.qpos[w.arm_qadr])
         except Exception:  # mink raises when the QP has no solution: hold the last command
@@ -301,6 +314,22 @@ class SMS3DPickEnv(gym.Env):
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
             mujoco.mj_forward(m, d)
         return self._obs(), reward, terminated, truncated, info
+
+    def _follow_tool_posture(self) -> None:
+        """``posture_target="tool"``: keep the IK's posture target a pre-grasp configuration for
+        the tool's *current* approach axis above the estimated cap top. Measured why: with the
+        posture solved once for the estimated axis, the scripted picker driven by the *true* pose
+        picked 13 / 20 episodes at 30 deg estimate error (20 / 20 at 0 deg) — the null-space pull
+        towards the estimate's arm configuration fights any correction of the axis; following the
+        tool, 19 / 20."""
+        w = self.world
+        z = w.data.site_xmat[w.tool_site].reshape(3, 3)[:, 2]
+        if np.degrees(np.arccos(np.clip(z @ self._posture_axis, -1.0, 1.0))) <= _POSTURE_RESOLVE_DEG:
+            return
+        q = self.reach.solve(self.target_pose[:3], -z, (0.05, 0.03))
+        if q is not None:
+            self.ik.set_posture(q)
+            self._posture_axis = z.copy()
 
     def failure_cause(self) -> str | None:
         """Why the episode is not (yet) a success, or None on success."""

@@ -16,7 +16,7 @@ from sms3d_env.training.config import (
     TrainConfig,
 )
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
-from sms3d_env.training.imitation import TEACHERS
+from sms3d_env.training.imitation import POSTURE_TARGETS, TEACHERS
 from sms3d_env.training.rl import train_policy
 
 
@@ -52,7 +52,7 @@ def _cmd_train_bc(args: Any) -> int:
     try:
         cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
                        pose_error_deg=args.pose_error_deg, pose_error_range_deg=args.pose_error_range,
-                       teacher=args.teacher, seed=args.seed, out=args.out,
+                       teacher=args.teacher, posture_target=args.posture_target, seed=args.seed, out=args.out,
                        num_mushrooms=tuple(args.demo_mushrooms), dagger_rounds=args.dagger_rounds,
                        dagger_episodes=args.dagger_episodes)
     except ValueError as e:
@@ -122,6 +122,9 @@ def register(subparsers: Any) -> None:
     bc.add_argument("--epochs", type=int, default=40, help="epochs of the first clone")
     bc.add_argument("--dagger-rounds", type=int, default=3, help="DAgger rounds after it (0: plain BC)")
     bc.add_argument("--dagger-episodes", type=int, default=150, help="episodes per DAgger round")
+    bc.add_argument("--posture-target", choices=POSTURE_TARGETS, default="estimate",
+                    help="the env's IK posture: estimate (default, solved once for the estimated axis) or "
+                         "tool (re-solved as the tool turns; lets a clone correct a wrong estimate)")
     bc.add_argument("--teacher", choices=TEACHERS, default="estimate",
                     help="estimate: the scripted picker labels from the observed pose; truth: from "
                          "the true pose (a privileged teacher under --pose-error-deg/--pose-error-range)")

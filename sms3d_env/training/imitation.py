@@ -33,6 +33,7 @@ import numpy as np
 
 TRAIN_ENV_ID = "SMS3DPickTrain-v0"
 TEACHERS = ("estimate", "truth")
+POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.env_args.POSTURE_TARGETS (kept torch/mujoco-free here)
 
 
 @dataclass(frozen=True)
@@ -52,6 +53,9 @@ class BCConfig:
             (estimated) pose, as it would on a robot; ``"truth"``: the privileged teacher, whose
             descent and twist follow the true pose (used only while training; the clone still
             sees only the observation).
+        posture_target: the env's IK posture option (``SMS3DPickEnv``): ``"tool"`` lets a picker
+            that corrects a wrong estimate move away from the estimate's arm configuration;
+            recorded in ``config.json`` with the other env options.
         epochs, batch_size, learning_rate, net_arch: the regression of the policy's mean action
             onto the picker's clean actions (mean squared error, Adam).
         log_std: the Gaussian policy's log standard deviation after cloning (exploration of an
@@ -70,6 +74,7 @@ class BCConfig:
     pose_error_deg: float = 0.0
     pose_error_range_deg: tuple[float, float] | None = None
     teacher: str = "estimate"
+    posture_target: str = "estimate"
     epochs: int = 40
     batch_size: int = 512
     learning_rate: float = 1e-3
@@ -113,6 +118,8 @@ class BCConfig:
             if self.pose_error_deg > 0:
                 raise bad("pose_error_range_deg", "excludes pose_error_deg > 0")
             object.__setattr__(self, "pose_error_range_deg", low_high)
+        if self.posture_target not in POSTURE_TARGETS:
+            raise bad("posture_target", f"must be one of {POSTURE_TARGETS}")
         if self.teacher not in TEACHERS:
             raise bad("teacher", f"must be one of {TEACHERS}")
         if not (isinstance(self.learning_rate, (int, float)) and 0 < self.learning_rate < 1):
@@ -128,7 +135,8 @@ class BCConfig:
                 "action_noise": self.action_noise, "pose_error_deg": self.pose_error_deg,
                 "seed": self.seed, "env_id": TRAIN_ENV_ID,
                 **({} if self.pose_error_range_deg is None and self.teacher == "estimate" else
-                   {"pose_error_range_deg": self.pose_error_range_deg, "teacher": self.teacher})}
+                   {"pose_error_range_deg": self.pose_error_range_deg, "teacher": self.teacher}),
+                **({} if self.posture_target == "estimate" else {"posture_target": self.posture_target})}
 
     def dagger_settings(self, round_: int) -> dict[str, Any]:
         """What DAgger round ``round_``'s data depend on (everything before it, too)."""
@@ -139,13 +147,14 @@ class BCConfig:
 
 
 def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
-                     pose_error_range_deg: tuple[float, float] | None = None) -> dict[str, Any]:
+                     pose_error_range_deg: tuple[float, float] | None = None,
+                     posture_target: str = "estimate") -> dict[str, Any]:
     """``gym.make(TRAIN_ENV_ID, **kwargs)`` arguments for a bed size and pose error (fixed, or
-    drawn per episode in ``pose_error_range_deg``)."""
+    drawn per episode in ``pose_error_range_deg``) and the IK posture option."""
     import generator
 
     kw: dict[str, Any] = {"scene_config": generator.SceneConfig().replace(
-        placement__num_mushrooms=int(num_mushrooms))}
+        placement__num_mushrooms=int(num_mushrooms)), **env_options(posture_target)}
     if pose_error_range_deg is not None:
         from sms3d_env.pose_sources import UniformNoisyPose
 
@@ -153,6 +162,12 @@ def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
     elif pose_error_deg > 0:
         kw.update(pose_source="noisy", pose_error_deg=float(pose_error_deg))
     return kw
+
+
+def env_options(posture_target: str = "estimate") -> dict[str, Any]:
+    """The env options beyond ``SMS3DPickTrain-v0``'s that a clone is trained (and must be run)
+    with."""
+    return {} if posture_target == "estimate" else {"posture_target": posture_target}
 
 
 def with_true_target(env: Any, obs: dict[str, np.ndarray], target: int) -> dict[str, np.ndarray]:
@@ -179,7 +194,8 @@ def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
     from sms3d_env.pickers.privileged import PrivilegedTeacher
     from sms3d_env.pickers.scripted import ScriptedPicker
 
-    envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg, cfg.pose_error_range_deg))
+    envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg, cfg.pose_error_range_deg,
+                                                    cfg.posture_target))
             for n in cfg.num_mushrooms]
     rng = np.random.default_rng([cfg.seed, seeds.start])
     obs_rows: dict[str, list[np.ndarray]] = {}
@@ -340,7 +356,7 @@ def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
         t0 = time.perf_counter()
         demos = load_or_collect(cfg, progress)
         t_demo = time.perf_counter() - t0
-        env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(cfg.num_mushrooms[0]))
+        env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(cfg.num_mushrooms[0], posture_target=cfg.posture_target))
         try:
             model = build_policy_model(env, demos, cfg.net_arch, cfg.log_std, cfg.seed)
         finally:
@@ -366,7 +382,8 @@ def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
         torch.set_num_threads(threads)
     model.save(str(out / "model.zip"))
     config = {"recipe": "bc", "algo": "ppo", "env_id": TRAIN_ENV_ID,
-              "env_options": dict(sms3d_env.TRAIN_OPTIONS), "max_episode_steps": 250,
+              "env_options": {**sms3d_env.TRAIN_OPTIONS, **env_options(cfg.posture_target)},
+              "max_episode_steps": 250,
               **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
     (out / "config.json").write_text(json.dumps(config, indent=2))
     summary = {"recipe": "bc", "demo_episodes": cfg.episodes,

@@ -1,0 +1,48 @@
+"""``posture_target``: the IK's null-space posture solved once for the estimated axis (default),
+or again as the tool turns ("tool"), so that a picker correcting a wrong estimate is not pulled
+back to the estimate's arm configuration."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import sms3d_env  # noqa: F401  (registers the env ids)
+from sms3d_env.env_args import POSTURE_TARGETS
+from sms3d_env.training import imitation
+
+
+def _posture_after_turning(posture_target: str) -> tuple[np.ndarray, np.ndarray]:
+    env = gym.make("SMS3DPick-v0", posture_target=posture_target)
+    try:
+        env.reset(seed=1)
+        u = env.unwrapped
+        before = u.ik.posture_task.target_q.copy()
+        turn = np.zeros(7)
+        turn[3] = 1.0  # full angular speed about world x: 0.8 rad/s x 0.04 s = 1.8 deg a step
+        for _ in range(6):
+            env.step(turn)
+        return before, u.ik.posture_task.target_q.copy()
+    finally:
+        env.close()
+
+
+def test_the_default_posture_stays_where_reset_solved_it():
+    before, after = _posture_after_turning("estimate")
+    np.testing.assert_array_equal(before, after)
+
+
+def test_the_tool_posture_follows_a_turn_beyond_five_degrees():
+    before, after = _posture_after_turning("tool")
+    assert np.abs(after - before).max() > 1e-3
+
+
+def test_a_bad_posture_target_is_refused_by_name():
+    with pytest.raises(ValueError, match="posture_target"):
+        gym.make("SMS3DPick-v0", posture_target="home")
+
+
+def test_the_imitation_recipe_knows_the_same_posture_targets():
+    assert imitation.POSTURE_TARGETS == POSTURE_TARGETS
+    assert imitation.env_options("tool") == {"posture_target": "tool"} and imitation.env_options() == {}
