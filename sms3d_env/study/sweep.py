@@ -333,6 +333,7 @@ def _cmd_sweep(args: Any) -> int:
             perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
             perception_realism=args.perception_realism, picker=args.picker, position_errors_mm=tuple(args.position_errors_mm),
             position_along_axis=args.position_along_axis, tools=tuple(args.tool),
+            env_kwargs={} if args.posture_target == "estimate" else {"posture_target": args.posture_target},
         )
     except ConfigError as exc:
         print(f"sms3d sweep: error: argument {SWEEP_FLAGS.get(exc.field, exc.field)}: {exc.message}", file=sys.stderr)
@@ -447,6 +448,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--picker", default=SweepConfig.picker,
                    help="scripted (default), policy (the shipped policy), policy:PATH/model.zip or "
                         "residual:PATH/model.zip; every picker sees the same seeded episodes")
+    p.add_argument("--posture-target", choices=("estimate", "tool"), default="estimate",
+                   help="the env's IK posture (SMS3DPickEnv posture_target): estimate (default) or tool; "
+                        "a learned picker's own recorded option wins")
     p.add_argument("--chunk", type=int, default=SweepConfig.chunk, help="episodes per resumable task (>= 1)")
     p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 1)), help="processes")
     p.set_defaults(func=_cmd_sweep)
