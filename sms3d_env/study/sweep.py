@@ -370,7 +370,9 @@ def _cmd_compare(args: Any) -> int:
         curves = {}
         for folder in args.sweeps:
             rows = load_rows(folder)
-            curves[rows[0].get("picker", "scripted")] = rows
+            label = rows[0].get("picker", "scripted")
+            # Two sweeps of one picker (e.g. with other env options) keep both curves.
+            curves[label if label not in curves else f"{label} ({Path(folder).name})"] = rows
     except (FileNotFoundError, CorruptFileError) as exc:
         print(f"sms3d sweep-compare: error: {exc}", file=sys.stderr)
         return 2

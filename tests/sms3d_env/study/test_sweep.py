@@ -177,3 +177,16 @@ def test_mcnemar_counts_only_discordant_pairs():
     assert mcnemar_p(same, same) == 1.0
     # 10 pairs where only the first picker succeeds: p = 2 / 2**10.
     assert mcnemar_p([True] * 10 + [False] * 5, [False] * 10 + [False] * 5) == pytest.approx(2 / 1024)
+
+
+def test_sweep_compare_keeps_two_sweeps_of_one_picker(tmp_path, capsys):
+    """Two sweeps of the scripted picker (here: the default and the tool-following IK posture)
+    are two curves, the second named by its folder, not one silently replaced."""
+    cfg = SweepConfig(errors_deg=(0.0,), episodes=1, num_mushrooms=8)
+    run_sweep(cfg, tmp_path / "default", progress=False)
+    run_sweep(dataclasses.replace(cfg, env_kwargs={"posture_target": "tool"}), tmp_path / "tool", progress=False)
+    assert main(["sweep-compare", str(tmp_path / "default"), str(tmp_path / "tool"),
+                 "--out", str(tmp_path / "cmp.png")]) == 0
+    table = capsys.readouterr().out
+    assert "| scripted | 0° |" in table and "| scripted (tool) | 0° |" in table
+    assert (tmp_path / "cmp.png").stat().st_size > 0
