@@ -106,8 +106,9 @@ class IKController:
         self.posture_task.set_target(home)
 
     def set_posture(self, q_arm: np.ndarray) -> None:
-        """Move the posture target (the null-space pull) to ``q_arm``; the command stays."""
-        home = self.posture_task.target_q.copy() if self.posture_task.target_q is not None else self.model.qpos0.copy()
+        """Move the posture target (the null-space pull) to ``q_arm``; the command stays. Call
+        after ``reset``, which sets the first target."""
+        home = self.posture_task.target_q.copy()
         home[self.arm_qadr] = q_arm
         self.posture_task.set_target(home)
 

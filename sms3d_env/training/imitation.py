@@ -136,7 +136,7 @@ class BCConfig:
                 "seed": self.seed, "env_id": TRAIN_ENV_ID,
                 **({} if self.pose_error_range_deg is None and self.teacher == "estimate" else
                    {"pose_error_range_deg": self.pose_error_range_deg, "teacher": self.teacher}),
-                **({} if self.posture_target == "estimate" else {"posture_target": self.posture_target})}
+                **env_options(self.posture_target)}
 
     def dagger_settings(self, round_: int) -> dict[str, Any]:
         """What DAgger round ``round_``'s data depend on (everything before it, too)."""
