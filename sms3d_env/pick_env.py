@@ -329,7 +329,9 @@ class SMS3DPickEnv(gym.Env):
         q = self.reach.solve(self.target_pose[:3], -z, (0.05, 0.03))
         if q is not None:
             self.ik.set_posture(q)
-            self._posture_axis = z.copy()
+        # A failed solve keeps the old posture but still records the axis it was tried for, so
+        # that the next attempt waits for another 5 deg turn instead of repeating every step.
+        self._posture_axis = z.copy()
 
     def failure_cause(self) -> str | None:
         """Why the episode is not (yet) a success, or None on success."""
