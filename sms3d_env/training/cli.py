@@ -11,12 +11,13 @@ from sms3d_env.training.config import (
     ALGOS,
     ENV_IDS,
     POSE_SOURCES,
+    POSTURE_TARGETS,
     RECIPES,
     REWARD_TYPES,
     TrainConfig,
 )
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
-from sms3d_env.training.imitation import POSTURE_TARGETS, TEACHERS
+from sms3d_env.training.imitation import TEACHERS
 from sms3d_env.training.rl import train_policy
 
 
@@ -37,7 +38,8 @@ def _cmd_train(args: Any) -> int:
                           n_envs=args.n_envs, pose_source=pose_source, pose_error_deg=args.pose_error_deg,
                           reward_type=args.reward_type, num_mushrooms=args.num_mushrooms, seed=args.seed,
                           out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
-                          checkpoint_freq=args.checkpoint_freq)
+                          checkpoint_freq=args.checkpoint_freq, learning_rate=args.learning_rate,
+                          target_kl=args.target_kl, posture_target=args.posture_target)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -115,6 +117,13 @@ def register(subparsers: Any) -> None:
     p.add_argument("--eval-freq", type=int, default=defaults.eval_freq, help="env steps between evaluations (0: none)")
     p.add_argument("--checkpoint-freq", type=int, default=defaults.checkpoint_freq,
                    help="env steps between checkpoints (0: none)")
+    p.add_argument("--posture-target", choices=POSTURE_TARGETS, default="estimate",
+                   help="the env's IK posture: estimate (default, solved once for the estimated axis) or "
+                        "tool (re-solved as the tool turns; lets a picker correct a wrong estimate)")
+    p.add_argument("--learning-rate", type=float, default=defaults.learning_rate, help="rl/residual: the optimiser's rate")
+    p.add_argument("--target-kl", type=float, default=None,
+                   help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "
+                        "passes 1.5 x this (default: no limit)")
     bc = p.add_argument_group("behaviour cloning (--recipe bc)")
     bc.add_argument("--demo-episodes", type=int, default=400, help="scripted episodes (failures dropped)")
     bc.add_argument("--demo-mushrooms", type=int, nargs="+", default=[10, 25], help="bed sizes cycled through")
@@ -122,9 +131,6 @@ def register(subparsers: Any) -> None:
     bc.add_argument("--epochs", type=int, default=40, help="epochs of the first clone")
     bc.add_argument("--dagger-rounds", type=int, default=3, help="DAgger rounds after it (0: plain BC)")
     bc.add_argument("--dagger-episodes", type=int, default=150, help="episodes per DAgger round")
-    bc.add_argument("--posture-target", choices=POSTURE_TARGETS, default="estimate",
-                    help="the env's IK posture: estimate (default, solved once for the estimated axis) or "
-                         "tool (re-solved as the tool turns; lets a clone correct a wrong estimate)")
     bc.add_argument("--teacher", choices=TEACHERS, default="estimate",
                     help="estimate: the scripted picker labels from the observed pose; truth: from "
                          "the true pose (a privileged teacher under --pose-error-deg/--pose-error-range)")

@@ -12,6 +12,12 @@ POSE_SOURCES = ("oracle", "noisy")
 REWARD_TYPES = ("dense", "sparse", "staged")
 ENV_IDS = ("SMS3DPick-v0", "SMS3DPickTrain-v0")
 RECIPES = ("rl", "bc", "residual")
+POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.env_args.POSTURE_TARGETS (kept free of scipy here)
+
+
+def env_options(posture_target: str = "estimate") -> dict[str, Any]:
+    """The env options beyond the env id's defaults that a policy is trained (and must be run) with."""
+    return {} if posture_target == "estimate" else {"posture_target": posture_target}
 
 
 @dataclass(frozen=True)
@@ -42,6 +48,13 @@ class TrainConfig:
         eval_episodes: episodes per periodic evaluation (oracle poses, same scenes per eval).
         learning_rate, batch_size, n_steps (PPO, per env), buffer_size and learning_starts (SAC),
         gamma, net_arch: algorithm hyper-parameters.
+        target_kl: PPO stops a round of updates early once the approximate KL divergence from the
+            rollout's policy exceeds 1.5 x this (None: no limit, SB3's default). A residual on a
+            working controller needs it: without one its updates ran at KL 0.03-0.07 and undid
+            seals the scripted picker made.
+        posture_target: the env's IK posture, ``"estimate"`` (default) or ``"tool"`` (re-solved
+            as the tool turns; lets a policy correct a wrong estimate). Saved in ``config.json``
+            as ``env_options`` so that evaluation rebuilds the same env.
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
             standard deviation of 1 on every normalised command; a residual starts quieter).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
@@ -70,6 +83,8 @@ class TrainConfig:
     eval_episodes: int = 10
     checkpoint_freq: int = 50_000
     learning_rate: float = 3e-4
+    target_kl: float | None = None
+    posture_target: str = "estimate"
     batch_size: int = 256
     n_steps: int = 1024
     buffer_size: int = 100_000
@@ -126,6 +141,11 @@ class TrainConfig:
             raise bad("max_wall_s", "must be None or a finite number > 0")
         if not (isinstance(self.learning_rate, (int, float)) and 0 < self.learning_rate < 1):
             raise bad("learning_rate", "must be in (0, 1)")
+        if self.target_kl is not None and not (isinstance(self.target_kl, (int, float))
+                                               and math.isfinite(self.target_kl) and self.target_kl > 0):
+            raise bad("target_kl", "must be None or a finite number > 0")
+        if self.posture_target not in POSTURE_TARGETS:
+            raise bad("posture_target", f"must be one of {POSTURE_TARGETS}")
         if not (0 < self.gamma <= 1):
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
@@ -149,6 +169,7 @@ class TrainConfig:
             kw["pose_source"] = UniformNoisyPose(*self.pose_error_range_deg)
         if self.scene_pool:
             kw["scene_pool"] = self.scene_pool
+        kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale, **kw}
 
     @classmethod

@@ -31,9 +31,10 @@ from typing import Any
 
 import numpy as np
 
+from sms3d_env.training.config import POSTURE_TARGETS, env_options
+
 TRAIN_ENV_ID = "SMS3DPickTrain-v0"
 TEACHERS = ("estimate", "truth")
-POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.env_args.POSTURE_TARGETS (kept torch/mujoco-free here)
 
 
 @dataclass(frozen=True)
@@ -162,12 +163,6 @@ def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
     elif pose_error_deg > 0:
         kw.update(pose_source="noisy", pose_error_deg=float(pose_error_deg))
     return kw
-
-
-def env_options(posture_target: str = "estimate") -> dict[str, Any]:
-    """The env options beyond ``SMS3DPickTrain-v0``'s that a clone is trained (and must be run)
-    with."""
-    return {} if posture_target == "estimate" else {"posture_target": posture_target}
 
 
 def with_true_target(env: Any, obs: dict[str, np.ndarray], target: int) -> dict[str, np.ndarray]:

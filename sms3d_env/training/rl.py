@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from sms3d_env.training.actor import VECNORM_FILE
-from sms3d_env.training.config import TrainConfig
+from sms3d_env.training.config import TrainConfig, env_options
 from sms3d_env.training.envs import normalized, vec_env
 
 
@@ -40,7 +40,7 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
         n_steps = cfg.n_steps
         batch = min(cfg.batch_size, n_steps * cfg.n_envs)
         return PPO("MultiInputPolicy", env, learning_rate=cfg.learning_rate, n_steps=n_steps,
-                   batch_size=batch, gamma=cfg.gamma, policy_kwargs=policy_kwargs, seed=cfg.seed,
+                   batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs, seed=cfg.seed,
                    device=cfg.device, verbose=cfg.verbose)
     return SAC("MultiInputPolicy", env, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
@@ -87,7 +87,8 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps(asdict(cfg), indent=2))
+    (out / "config.json").write_text(json.dumps(
+        {**asdict(cfg), "env_options": env_options(cfg.posture_target)}, indent=2))
     env = vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"))
     if cfg.normalize:
         env = normalized(env, training=True)

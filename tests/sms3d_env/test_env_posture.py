@@ -10,6 +10,7 @@ import pytest
 
 import sms3d_env  # noqa: F401  (registers the env ids)
 from sms3d_env.env_args import POSTURE_TARGETS
+from sms3d_env.training import config as training_config
 from sms3d_env.training import imitation
 
 
@@ -43,8 +44,8 @@ def test_a_bad_posture_target_is_refused_by_name():
         gym.make("SMS3DPick-v0", posture_target="home")
 
 
-def test_the_imitation_recipe_knows_the_same_posture_targets():
-    assert imitation.POSTURE_TARGETS == POSTURE_TARGETS
+def test_the_training_recipes_know_the_same_posture_targets():
+    assert training_config.POSTURE_TARGETS == POSTURE_TARGETS
     assert imitation.env_options("tool") == {"posture_target": "tool"} and imitation.env_options() == {}
 
 

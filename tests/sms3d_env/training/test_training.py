@@ -95,6 +95,9 @@ def test_sac_short_run(tmp_path):
     ({"max_wall_s": 0.0}, "max_wall_s"),
     ({"learning_rate": 0.0}, "learning_rate"),
     ({"net_arch": ()}, "net_arch"),
+    ({"target_kl": 0.0}, "target_kl"),
+    ({"target_kl": float("nan")}, "target_kl"),
+    ({"posture_target": "home"}, "posture_target"),
 ])
 def test_invalid_config_names_field(kw, field):
     with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
@@ -107,6 +110,22 @@ def test_config_roundtrip_and_frozen():
     assert TrainConfig.from_dict(json.loads(json.dumps(cfg.__dict__))) == cfg
     with pytest.raises(AttributeError):
         cfg.algo = "sac"  # type: ignore[misc]
+
+
+def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path):
+    """What a residual fine-tuning run depends on reaches PPO and, through ``config.json``, every
+    later evaluation of the policy."""
+    from sms3d_env.training.actor import PolicyActor
+
+    cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, target_kl=0.01,
+                      posture_target="tool", learning_rate=1e-4, out=str(tmp_path),
+                      **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
+    assert cfg.env_kwargs()["posture_target"] == "tool"
+    train_policy(cfg)
+    model = load_model(tmp_path / "model.zip")
+    assert model.target_kl == 0.01 and model.learning_rate == 1e-4
+    assert PolicyActor(tmp_path / "model.zip").env_options == {"posture_target": "tool"}
+    assert "posture_target" not in TrainConfig().env_kwargs()
 
 
 def test_eval_rejects_bad_arguments(tmp_path):
