@@ -144,6 +144,8 @@ class TrainConfig:
         if self.target_kl is not None and not (isinstance(self.target_kl, (int, float))
                                                and math.isfinite(self.target_kl) and self.target_kl > 0):
             raise bad("target_kl", "must be None or a finite number > 0")
+        if self.target_kl is not None and self.algo != "ppo":
+            raise bad("target_kl", "limits PPO's updates; SAC has none to limit (leave it None)")
         if self.posture_target not in POSTURE_TARGETS:
             raise bad("posture_target", f"must be one of {POSTURE_TARGETS}")
         if not (0 < self.gamma <= 1):

@@ -40,8 +40,8 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
         n_steps = cfg.n_steps
         batch = min(cfg.batch_size, n_steps * cfg.n_envs)
         return PPO("MultiInputPolicy", env, learning_rate=cfg.learning_rate, n_steps=n_steps,
-                   batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs, seed=cfg.seed,
-                   device=cfg.device, verbose=cfg.verbose)
+                   batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
+                   seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
     return SAC("MultiInputPolicy", env, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
                policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)

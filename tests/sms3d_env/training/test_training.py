@@ -97,6 +97,7 @@ def test_sac_short_run(tmp_path):
     ({"net_arch": ()}, "net_arch"),
     ({"target_kl": 0.0}, "target_kl"),
     ({"target_kl": float("nan")}, "target_kl"),
+    ({"algo": "sac", "target_kl": 0.01}, "target_kl"),
     ({"posture_target": "home"}, "posture_target"),
 ])
 def test_invalid_config_names_field(kw, field):
