@@ -32,7 +32,7 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
                    suction_mode: Any, horizon: Any, scene_pool: Any, pool_seed: Any, scenes: Any,
                    pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
                    image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
-                   scene_config: Any, posture_target: Any = "estimate") -> None:
+                   scene_config: Any, posture_target: Any = "estimate", pregrasp_start: Any = 0.0) -> None:
     """Every check of the env's keyword arguments that needs no model (``tool`` is the resolved
     tool, ``robot.tool`` or the ``tool`` argument)."""
     if render_mode is not None and render_mode not in RENDER_MODES:
@@ -49,6 +49,7 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
         raise ValueError(f"suction_mode={suction_mode!r} applies to the suction tool only (tool={tool!r})")
     if posture_target not in POSTURE_TARGETS:
         raise ValueError(f"posture_target must be one of {POSTURE_TARGETS}, got {posture_target!r}")
+    _finite("pregrasp_start", pregrasp_start, 0.0, 1.0, "a probability in [0, 1]")
     _int_at_least("horizon", horizon, 1)
     _int_at_least("scene_pool", scene_pool)
     _int_at_least("pool_seed", pool_seed)

@@ -135,6 +135,14 @@ class SMS3DPickEnv(gym.Env):
             configuration solved once per episode for the *estimated* axis; ``"tool"`` solved
             again whenever the tool axis turns more than 5 deg away from the axis of the last
             solve, so a picker that corrects a wrong estimate is not pulled back towards it.
+        pregrasp_start: the share of resets (a probability) that start the arm at a pre-grasp
+            pose instead of home: the cup on the *estimated* stem axis 2–8 cm above the estimated
+            cap top, facing down it, each joint then moved by N(0, 0.01 rad) — a start state a
+            real arm reaches by its planner from the same estimate. A training option (a reverse
+            curriculum after Florensa et al. 2017, "Reverse Curriculum Generation for
+            Reinforcement Learning"): the seal, twist and lift are met in every such episode,
+            not only after an approach learned first. 0 (default) always starts at home and
+            draws nothing from the episode's random stream.
 
     ``SMS3DPickTrain-v0`` sets the training options: ``suction_mode="latched"``,
     ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
@@ -172,6 +180,7 @@ class SMS3DPickEnv(gym.Env):
         scene_pool: int = 0,
         pool_seed: int = 0,
         posture_target: str = "estimate",
+        pregrasp_start: float = 0.0,
     ) -> None:
         self.robot_cfg = robot or RobotConfig()
         check_env_args(render_mode=render_mode, reward_type=reward_type, control_dt=control_dt,
@@ -180,7 +189,8 @@ class SMS3DPickEnv(gym.Env):
                        pose_source=pose_source, pose_error_deg=pose_error_deg,
                        position_noise=position_noise, target_rule=target_rule, image_size=image_size,
                        render_size=render_size, max_tilt_deg=max_tilt_deg, free_radius=free_radius,
-                       scene_config=scene_config, posture_target=posture_target)
+                       scene_config=scene_config, posture_target=posture_target,
+                       pregrasp_start=pregrasp_start)
         if tool is not None:
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
@@ -198,7 +208,7 @@ class SMS3DPickEnv(gym.Env):
         self.free_radius = free_radius
         self.suction_mode, self.end_on_dead_end = suction_mode, bool(end_on_dead_end)
         self.task_obs, self.horizon = bool(task_obs), horizon
-        self.posture_target = posture_target
+        self.posture_target, self.pregrasp_start = posture_target, float(pregrasp_start)
         self._posture_axis = np.zeros(3)  # the tool axis the posture target was solved for
 
         self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
@@ -255,15 +265,18 @@ class SMS3DPickEnv(gym.Env):
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
         self.done = False
         m, d = w.model, w.data
-        d.qpos[w.arm_qadr] = self.home_q
-        d.ctrl[:6] = self.home_q
+        q_start = self.home_q
+        if self.pregrasp_start > 0 and self.np_random.random() < self.pregrasp_start:
+            q_start = self._pregrasp_configuration(estimate.cap_top, estimate.stem_axis)
+        d.qpos[w.arm_qadr] = q_start
+        d.ctrl[:6] = q_start
         self.picking.tool.reset()
         # Posture target of the IK: the arm's configuration at a pre-grasp pose above the
         # *estimated* target (the pose the policy sees). Home holds the cup pointing down near the
         # Jaco's wrist singularity (joint 5 ~ 0, joints 4 and 6 aligned); a posture target at home
         # let the differential IK stall there, centimetres short of some pre-grasp poses.
         q_pre = self.reach.solve(estimate.cap_top, estimate.stem_axis, (0.05, 0.03))
-        self.ik.reset(self.home_q, self.home_q if q_pre is None else q_pre)
+        self.ik.reset(q_start, self.home_q if q_pre is None else q_pre)
         self._posture_axis = -estimate.stem_axis / np.linalg.norm(estimate.stem_axis)
         mujoco.mj_forward(m, d)
         for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
@@ -314,6 +327,16 @@ class SMS3DPickEnv(gym.Env):
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
             mujoco.mj_forward(m, d)
         return self._obs(), reward, terminated, truncated, info
+
+    def _pregrasp_configuration(self, cap_top: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        """``pregrasp_start``: arm joints with the cup 2–8 cm above the estimated cap top on the
+        estimated axis, facing down it, each joint moved by N(0, 0.01 rad) (a few millimetres and
+        about a degree at the tool); home where the pose has no IK solution."""
+        rng = self.np_random
+        q = self.reach.solve(cap_top, axis, (0.08, rng.uniform(0.02, 0.08)))
+        if q is None:
+            return self.home_q
+        return np.clip(q + rng.normal(0.0, 0.01, q.shape), self.reach.lo, self.reach.hi)
 
     def _follow_tool_posture(self) -> None:
         """``posture_target="tool"``: keep the IK's posture target a pre-grasp configuration for

@@ -39,7 +39,8 @@ def _cmd_train(args: Any) -> int:
                           reward_type=args.reward_type, num_mushrooms=args.num_mushrooms, seed=args.seed,
                           out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
                           checkpoint_freq=args.checkpoint_freq, learning_rate=args.learning_rate,
-                          target_kl=args.target_kl, posture_target=args.posture_target)
+                          target_kl=args.target_kl, posture_target=args.posture_target,
+                          pregrasp_start=args.pregrasp_start)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -51,6 +52,10 @@ def _cmd_train(args: Any) -> int:
 def _cmd_train_bc(args: Any) -> int:
     from sms3d_env.training.imitation import BCConfig, train_bc
 
+    if args.pregrasp_start:
+        print("error: --pregrasp-start applies to the rl and residual recipes (the bc recipe's "
+              "demonstrations start at home)")
+        return 2
     try:
         cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
                        pose_error_deg=args.pose_error_deg, pose_error_range_deg=args.pose_error_range,
@@ -120,6 +125,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--posture-target", choices=POSTURE_TARGETS, default="estimate",
                    help="the env's IK posture: estimate (default, solved once for the estimated axis) or "
                         "tool (re-solved as the tool turns; lets a picker correct a wrong estimate)")
+    p.add_argument("--pregrasp-start", type=float, default=defaults.pregrasp_start, metavar="P",
+                   help="rl/residual: the share of training episodes that start at a pre-grasp pose above the "
+                        "estimated target instead of home (a reverse curriculum; evaluation starts at home)")
     p.add_argument("--learning-rate", type=float, default=defaults.learning_rate, help="rl/residual: the optimiser's rate")
     p.add_argument("--target-kl", type=float, default=None,
                    help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "

@@ -55,6 +55,9 @@ class TrainConfig:
         posture_target: the env's IK posture, ``"estimate"`` (default) or ``"tool"`` (re-solved
             as the tool turns; lets a policy correct a wrong estimate). Saved in ``config.json``
             as ``env_options`` so that evaluation rebuilds the same env.
+        pregrasp_start: the share of training resets that start the arm at a pre-grasp pose
+            above the estimated target instead of home (the env's ``pregrasp_start``, a reverse
+            curriculum); periodic and final evaluations always start at home.
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
             standard deviation of 1 on every normalised command; a residual starts quieter).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
@@ -85,6 +88,7 @@ class TrainConfig:
     learning_rate: float = 3e-4
     target_kl: float | None = None
     posture_target: str = "estimate"
+    pregrasp_start: float = 0.0
     batch_size: int = 256
     n_steps: int = 1024
     buffer_size: int = 100_000
@@ -148,6 +152,9 @@ class TrainConfig:
             raise bad("target_kl", "limits PPO's updates; SAC has none to limit (leave it None)")
         if self.posture_target not in POSTURE_TARGETS:
             raise bad("posture_target", f"must be one of {POSTURE_TARGETS}")
+        if not (isinstance(self.pregrasp_start, (int, float)) and not isinstance(self.pregrasp_start, bool)
+                and 0 <= self.pregrasp_start <= 1):
+            raise bad("pregrasp_start", "must be a probability in [0, 1]")
         if not (0 < self.gamma <= 1):
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
@@ -171,6 +178,8 @@ class TrainConfig:
             kw["pose_source"] = UniformNoisyPose(*self.pose_error_range_deg)
         if self.scene_pool:
             kw["scene_pool"] = self.scene_pool
+        if self.pregrasp_start:
+            kw["pregrasp_start"] = float(self.pregrasp_start)
         kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale, **kw}
 

@@ -101,9 +101,9 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
         model.set_logger(configure(str(out), formats))
         callbacks: list[Any] = []
         if cfg.eval_freq > 0:
-            # Periodic evaluation under the training pose condition (fixed seeds).
-            # Fresh beds, not the training pool's.
-            eval_kw = {k: v for k, v in cfg.env_kwargs().items() if k != "scene_pool"}
+            # Periodic evaluation under the training pose condition (fixed seeds): fresh beds, not
+            # the training pool's, and every episode from home.
+            eval_kw = {k: v for k, v in cfg.env_kwargs().items() if k not in ("scene_pool", "pregrasp_start")}
             eval_env = vec_env(eval_kw, 1, cfg.seed + 10_000, None)
             if cfg.normalize:
                 # EvalCallback copies the training statistics into it before each evaluation.

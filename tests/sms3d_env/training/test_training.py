@@ -99,6 +99,8 @@ def test_sac_short_run(tmp_path):
     ({"target_kl": float("nan")}, "target_kl"),
     ({"algo": "sac", "target_kl": 0.01}, "target_kl"),
     ({"posture_target": "home"}, "posture_target"),
+    ({"pregrasp_start": 1.5}, "pregrasp_start"),
+    ({"pregrasp_start": -0.1}, "pregrasp_start"),
 ])
 def test_invalid_config_names_field(kw, field):
     with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
@@ -127,6 +129,33 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
     assert model.target_kl == 0.01 and model.learning_rate == 1e-4
     assert PolicyActor(tmp_path / "model.zip").env_options == {"posture_target": "tool"}
     assert "posture_target" not in TrainConfig().env_kwargs()
+
+
+def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
+    """The training envs start half their episodes at a pre-grasp pose; the periodic evaluation
+    and every later evaluation of the saved policy start at home."""
+    from sms3d_env.training import rl
+    from sms3d_env.training.actor import PolicyActor
+
+    built = []
+    real_vec_env = rl.vec_env
+    monkeypatch.setattr(rl, "vec_env", lambda kw, *a, **k: built.append(kw) or real_vec_env(kw, *a, **k))
+    cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, pregrasp_start=0.5,
+                      out=str(tmp_path), **{**FAST, "checkpoint_freq": 0})
+    train_policy(cfg)
+    training, evaluation = built
+    assert training["pregrasp_start"] == 0.5 and "pregrasp_start" not in evaluation
+    assert json.loads((tmp_path / "config.json").read_text())["pregrasp_start"] == 0.5
+    assert PolicyActor(tmp_path / "model.zip").env_options == {}
+    assert "pregrasp_start" not in TrainConfig().env_kwargs()
+
+
+def test_the_bc_recipe_refuses_pregrasp_starts(capsys):
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="cmd"))
+    a = parser.parse_args(["train-policy", "--recipe", "bc", "--pregrasp-start", "0.5"])
+    assert a.func(a) == 2
+    assert "--pregrasp-start" in capsys.readouterr().out
 
 
 def test_eval_rejects_bad_arguments(tmp_path):
