@@ -135,14 +135,16 @@ class SMS3DPickEnv(gym.Env):
             configuration solved once per episode for the *estimated* axis; ``"tool"`` solved
             again whenever the tool axis turns more than 5 deg away from the axis of the last
             solve, so a picker that corrects a wrong estimate is not pulled back towards it.
-        pregrasp_start: the share of resets (a probability) that start the arm at a pre-grasp
-            pose instead of home: the cup on the *estimated* stem axis 2–8 cm above the estimated
-            cap top, facing down it, each joint then moved by N(0, 0.01 rad) — a start state a
-            real arm reaches by its planner from the same estimate. A training option (a reverse
-            curriculum after Florensa et al. 2017, "Reverse Curriculum Generation for
-            Reinforcement Learning"): the seal, twist and lift are met in every such episode,
-            not only after an approach learned first. 0 (default) always starts at home and
-            draws nothing from the episode's random stream.
+        pregrasp_start: the share of resets (a probability) that start the arm on the way from
+            home to a pre-grasp pose instead of at home: the joints at a uniformly drawn fraction
+            of the way from home to a configuration with the cup on the *estimated* stem axis
+            2–8 cm above the estimated cap top, facing down it, each then moved by
+            N(0, 0.01 rad) — start states a real arm reaches by its planner from the same
+            estimate. A training option (a reverse curriculum after Florensa et al. 2017,
+            "Reverse Curriculum Generation for Reinforcement Learning"): the seal, twist and
+            lift are met from the first episodes, and the approach is learned backwards from
+            them. 0 (default) always starts at home and draws nothing from the episode's random
+            stream.
 
     ``SMS3DPickTrain-v0`` sets the training options: ``suction_mode="latched"``,
     ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
@@ -329,13 +331,15 @@ class SMS3DPickEnv(gym.Env):
         return self._obs(), reward, terminated, truncated, info
 
     def _pregrasp_configuration(self, cap_top: np.ndarray, axis: np.ndarray) -> np.ndarray:
-        """``pregrasp_start``: arm joints with the cup 2–8 cm above the estimated cap top on the
-        estimated axis, facing down it, each joint moved by N(0, 0.01 rad) (a few millimetres and
-        about a degree at the tool); home where the pose has no IK solution."""
+        """``pregrasp_start``: arm joints a uniform fraction of the way from home to a pre-grasp
+        configuration (the cup 2–8 cm above the estimated cap top on the estimated axis, facing
+        down it), each joint moved by N(0, 0.01 rad) (a few millimetres and about a degree at the
+        tool); home where the pre-grasp pose has no IK solution."""
         rng = self.np_random
-        q = self.reach.solve(cap_top, axis, (0.08, rng.uniform(0.02, 0.08)))
-        if q is None:
+        q_pre = self.reach.solve(cap_top, axis, (0.08, rng.uniform(0.02, 0.08)))
+        if q_pre is None:
             return self.home_q
+        q = self.home_q + rng.uniform() * (q_pre - self.home_q)
         return np.clip(q + rng.normal(0.0, 0.01, q.shape), self.reach.lo, self.reach.hi)
 
     def _follow_tool_posture(self) -> None:

@@ -126,8 +126,8 @@ def register(subparsers: Any) -> None:
                    help="the env's IK posture: estimate (default, solved once for the estimated axis) or "
                         "tool (re-solved as the tool turns; lets a picker correct a wrong estimate)")
     p.add_argument("--pregrasp-start", type=float, default=defaults.pregrasp_start, metavar="P",
-                   help="rl/residual: the share of training episodes that start at a pre-grasp pose above the "
-                        "estimated target instead of home (a reverse curriculum; evaluation starts at home)")
+                   help="rl/residual: the share of training episodes that start on the way from home to a pre-grasp "
+                        "pose above the estimated target (a reverse curriculum; evaluation starts at home)")
     p.add_argument("--learning-rate", type=float, default=defaults.learning_rate, help="rl/residual: the optimiser's rate")
     p.add_argument("--target-kl", type=float, default=None,
                    help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "

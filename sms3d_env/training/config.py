@@ -55,8 +55,8 @@ class TrainConfig:
         posture_target: the env's IK posture, ``"estimate"`` (default) or ``"tool"`` (re-solved
             as the tool turns; lets a policy correct a wrong estimate). Saved in ``config.json``
             as ``env_options`` so that evaluation rebuilds the same env.
-        pregrasp_start: the share of training resets that start the arm at a pre-grasp pose
-            above the estimated target instead of home (the env's ``pregrasp_start``, a reverse
+        pregrasp_start: the share of training resets that start the arm on the way from home to a
+            pre-grasp pose above the estimated target (the env's ``pregrasp_start``, a reverse
             curriculum); periodic and final evaluations always start at home.
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
             standard deviation of 1 on every normalised command; a residual starts quieter).

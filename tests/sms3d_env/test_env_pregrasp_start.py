@@ -1,5 +1,5 @@
-"""``pregrasp_start``: a share of resets that start the arm at a pre-grasp pose above the
-*estimated* target (a reverse curriculum for training); 0 (default) starts at home and leaves the
+"""``pregrasp_start``: a share of resets that start the arm on the way from home to a pre-grasp
+pose above the *estimated* target (a reverse curriculum for training); 0 (default) starts at home and leaves the
 episode's random stream untouched."""
 
 from __future__ import annotations
@@ -25,19 +25,28 @@ def _env(**kw):
     return gym.make("SMS3DPickTrain-v0", scene_config=BED, **kw)
 
 
-def test_a_pregrasp_start_puts_the_cup_above_the_estimate_facing_down_its_axis():
-    env = _env(pregrasp_start=1.0, pose_source="noisy", pose_error_deg=20.0)
+def _start(seed: int, **kw) -> tuple[float, float]:
+    """Distance (m) of the tool from the estimated cap top and its angle (deg) to the estimated
+    axis after a reset."""
+    env = _env(pose_source="noisy", pose_error_deg=20.0, **kw)
     try:
-        for seed in range(3):
-            obs, _ = env.reset(seed=seed)
-            offset, angle = obs["tool_in_target"][:3], obs["tool_in_target"][6]
-            # 2-8 cm up the estimated axis; the joint jitter (0.01 rad) moves it a few mm and ~1 deg.
-            assert 0.015 <= offset[2] <= 0.09, offset
-            assert math.hypot(offset[0], offset[1]) < 0.015, offset
-            assert math.degrees(angle) < 3.0
-            assert np.abs(obs["joint_vel"]).max() < 0.05  # settled, not thrown
+        obs, _ = env.reset(seed=seed)
+        assert np.abs(obs["joint_vel"]).max() < 0.05  # settled, not thrown
+        t = obs["tool_in_target"]
+        return float(np.linalg.norm(t[:3])), math.degrees(t[6])
     finally:
         env.close()
+
+
+def test_pregrasp_starts_lie_on_the_way_from_home_to_the_estimate():
+    home = [_start(seed) for seed in range(6)]
+    near = [_start(seed, pregrasp_start=1.0) for seed in range(6)]
+    # Between home and 2-8 cm above the estimated cap top; the 0.01 rad joint jitter moves the
+    # tool by a few millimetres.
+    for (d_home, _), (d, _) in zip(home, near, strict=True):
+        assert 0.015 <= d <= d_home + 0.01
+    assert np.mean([d for d, _ in near]) < 0.8 * np.mean([d for d, _ in home])
+    assert min(d for d, _ in near) < 0.5 * min(d for d, _ in home)
 
 
 def test_the_scripted_picker_picks_from_a_pregrasp_start():
