@@ -47,6 +47,23 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
                policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
 
 
+def _save_beside_best(env: Any, out: Path) -> Any:
+    """A callback for ``EvalCallback``'s new best: the observation statistics of that moment and
+    the run's ``config.json`` beside ``best/best_model.zip``, so that ``eval-policy`` and the sweep
+    load the best model as they load the final one (the statistics keep changing after it)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _SaveBesideBest(BaseCallback):
+        def _on_step(self) -> bool:
+            best = out / "best"
+            best.mkdir(parents=True, exist_ok=True)
+            env.save(str(best / VECNORM_FILE))
+            (best / "config.json").write_text((out / "config.json").read_text())
+            return True
+
+    return _SaveBesideBest()
+
+
 def _wall_clock_callback(max_wall_s: float) -> Any:
     from stable_baselines3.common.callbacks import BaseCallback
 
@@ -111,6 +128,7 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
             callbacks.append(EvalCallback(
                 eval_env, n_eval_episodes=cfg.eval_episodes, eval_freq=max(cfg.eval_freq // cfg.n_envs, 1),
                 log_path=str(out / "eval"), best_model_save_path=str(out / "best"),
+                callback_on_new_best=_save_beside_best(env, out) if cfg.normalize else None,
                 deterministic=True, verbose=cfg.verbose, warn=False))
         if cfg.checkpoint_freq > 0:
             callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),

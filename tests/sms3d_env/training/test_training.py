@@ -150,6 +150,19 @@ def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
     assert "pregrasp_start" not in TrainConfig().env_kwargs()
 
 
+def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
+    """``best/best_model.zip`` loads like the final model: its VecNormalize statistics and the
+    run's config.json lie beside it (they were missing, and the statistics drift after the best)."""
+    from sms3d_env.training.actor import PolicyActor
+
+    cfg = TrainConfig(algo="ppo", total_steps=256, n_steps=128, batch_size=64, normalize=True,
+                      out=str(tmp_path), **{**FAST, "checkpoint_freq": 0})
+    train_policy(cfg)
+    actor = PolicyActor(tmp_path / "best" / "best_model.zip")
+    assert actor.obs_stats is not None and actor.env_id == cfg.env_id
+    assert (tmp_path / "best" / "config.json").read_text() == (tmp_path / "config.json").read_text()
+
+
 def test_the_bc_recipe_refuses_pregrasp_starts(capsys):
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="cmd"))
