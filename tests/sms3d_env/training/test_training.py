@@ -132,8 +132,8 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
 
 
 def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
-    """The training envs start half their episodes at a pre-grasp pose; the periodic evaluation
-    and every later evaluation of the saved policy start at home."""
+    """The training envs start a share of their episodes on the way to a pre-grasp pose; the
+    periodic evaluation and every later evaluation of the saved policy start at home."""
     from sms3d_env.training import rl
     from sms3d_env.training.actor import PolicyActor
 
