@@ -28,6 +28,10 @@ def _finite(name: str, v: Any, lo: float, hi: float, what: str) -> None:
         raise ValueError(f"{name} must be {what}, got {v!r}")
 
 
+def check_pregrasp_start(share: Any) -> None:
+    _finite("pregrasp_start", share, 0.0, 1.0, "a probability in [0, 1]")
+
+
 def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, substeps: Any, tool: Any,
                    suction_mode: Any, horizon: Any, scene_pool: Any, pool_seed: Any, scenes: Any,
                    pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
@@ -49,7 +53,7 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
         raise ValueError(f"suction_mode={suction_mode!r} applies to the suction tool only (tool={tool!r})")
     if posture_target not in POSTURE_TARGETS:
         raise ValueError(f"posture_target must be one of {POSTURE_TARGETS}, got {posture_target!r}")
-    _finite("pregrasp_start", pregrasp_start, 0.0, 1.0, "a probability in [0, 1]")
+    check_pregrasp_start(pregrasp_start)
     _int_at_least("horizon", horizon, 1)
     _int_at_least("scene_pool", scene_pool)
     _int_at_least("pool_seed", pool_seed)

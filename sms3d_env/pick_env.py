@@ -24,7 +24,13 @@ from gymnasium import spaces
 
 from generator.gl import open_renderer
 from sms3d_env.controller import ControllerConfig, IKController
-from sms3d_env.env_args import POSTURE_TARGETS, RENDER_MODES, SUCTION_MODES, check_env_args
+from sms3d_env.env_args import (
+    POSTURE_TARGETS,
+    RENDER_MODES,
+    SUCTION_MODES,
+    check_env_args,
+    check_pregrasp_start,
+)
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
 from sms3d_env.pose_sources import PoseSource, make_pose_source
@@ -96,7 +102,8 @@ class SMS3DPickEnv(gym.Env):
     ``info``: ``is_success``, ``failure_cause`` (one of ``FAILURE_CAUSES``), ``target``,
     ``reachable``, ``gripped``, ``gripped_target``, ``target_detached``, ``bruised``,
     ``neighbours_disturbed``, ``lift``, ``unstable_simulation`` (the picking model's
-    ``evaluate()``), plus the staged reward's terms.
+    ``evaluate()``), ``start`` (``"home"``, or ``"pregrasp"`` for a ``pregrasp_start`` reset),
+    plus the staged reward's terms.
 
     Args:
         render_mode: ``"rgb_array"`` or ``"depth_array"`` (metric depth in metres).
@@ -144,7 +151,9 @@ class SMS3DPickEnv(gym.Env):
             "Reverse Curriculum Generation for Reinforcement Learning"): the seal, twist and
             lift are met from the first episodes, and the approach is learned backwards from
             them. 0 (default) always starts at home and draws nothing from the episode's random
-            stream.
+            stream. ``info["start"]`` says which start an episode had (``"home"`` or
+            ``"pregrasp"``); ``set_pregrasp_start(p)`` changes the share between episodes (a
+            training schedule reaches it through ``VecEnv.env_method``).
 
     ``SMS3DPickTrain-v0`` sets the training options: ``suction_mode="latched"``,
     ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
@@ -267,9 +276,10 @@ class SMS3DPickEnv(gym.Env):
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
         self.done = False
         m, d = w.model, w.data
-        q_start = self.home_q
+        q_start, self._start = self.home_q, "home"
         if self.pregrasp_start > 0 and self.np_random.random() < self.pregrasp_start:
             q_start = self._pregrasp_configuration(estimate.cap_top, estimate.stem_axis)
+            self._start = "pregrasp"
         d.qpos[w.arm_qadr] = q_start
         d.ctrl[:6] = q_start
         self.picking.tool.reset()
@@ -284,7 +294,7 @@ class SMS3DPickEnv(gym.Env):
         for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
             mujoco.mj_step(m, d)
         self.picking.settled()
-        return self._obs(), self.picking.evaluate()
+        return self._obs(), {**self.picking.evaluate(), "start": self._start}
 
     def step(self, action: np.ndarray):
         if self.world is None:
@@ -324,11 +334,16 @@ class SMS3DPickEnv(gym.Env):
         truncated = ep.unstable
         self.done = terminated or truncated
         reward, terms = self._reward(info["is_success"])
-        info.update({f"reward_{k}": v for k, v in terms.items()})
+        info.update({f"reward_{k}": v for k, v in terms.items()}, start=self._start)
         if ep.unstable:
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
             mujoco.mj_forward(m, d)
         return self._obs(), reward, terminated, truncated, info
+
+    def set_pregrasp_start(self, share: float) -> None:
+        """Change ``pregrasp_start`` (a probability in [0, 1]) from the next reset on."""
+        check_pregrasp_start(share)
+        self.pregrasp_start = float(share)
 
     def _pregrasp_configuration(self, cap_top: np.ndarray, axis: np.ndarray) -> np.ndarray:
         """``pregrasp_start``: arm joints a uniform fraction of the way from home to a pre-grasp

@@ -5,6 +5,7 @@
 | ``TrainConfig`` (RL settings, saved as ``config.json``), ``env_kwargs`` | :mod:`~sms3d_env.training.config` |
 | the training envs (``make_env``, ``vec_env``, ``normalized``) | :mod:`~sms3d_env.training.envs` |
 | PPO/SAC training (``train_policy``) | :mod:`~sms3d_env.training.rl` |
+| the start-state curriculum that follows home-start success (``pregrasp_annealing``) | :mod:`~sms3d_env.training.curriculum` |
 | behaviour cloning + DAgger of the scripted picker (``BCConfig``, ``train_bc``) | :mod:`~sms3d_env.training.imitation` |
 | residual policies on top of the scripted picker (``ResidualPicker``) | :mod:`~sms3d_env.training.residual` |
 | the shipped policies' features extractor (``NormalizedFlatten``) | :mod:`~sms3d_env.training.policy_features` |

@@ -40,7 +40,7 @@ def _cmd_train(args: Any) -> int:
                           out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
                           checkpoint_freq=args.checkpoint_freq, learning_rate=args.learning_rate,
                           target_kl=args.target_kl, posture_target=args.posture_target,
-                          pregrasp_start=args.pregrasp_start)
+                          pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -52,9 +52,9 @@ def _cmd_train(args: Any) -> int:
 def _cmd_train_bc(args: Any) -> int:
     from sms3d_env.training.imitation import BCConfig, train_bc
 
-    if args.pregrasp_start:
-        print("error: --pregrasp-start applies to the rl and residual recipes (the bc recipe's "
-              "demonstrations start at home)")
+    if args.pregrasp_start or args.pregrasp_anneal:
+        print("error: --pregrasp-start and --pregrasp-anneal apply to the rl and residual recipes "
+              "(the bc recipe's demonstrations start at home)")
         return 2
     try:
         cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
@@ -128,6 +128,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--pregrasp-start", type=float, default=defaults.pregrasp_start, metavar="P",
                    help="rl/residual: the share of training episodes that start on the way from home to a pre-grasp "
                         "pose above the estimated target (a reverse curriculum; evaluation starts at home)")
+    p.add_argument("--pregrasp-anneal", action="store_true",
+                   help="rl/residual: lower that share as training episodes from home succeed: "
+                        "P x (1 - success of the last 100 home starts), set after each rollout")
     p.add_argument("--learning-rate", type=float, default=defaults.learning_rate, help="rl/residual: the optimiser's rate")
     p.add_argument("--target-kl", type=float, default=None,
                    help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "

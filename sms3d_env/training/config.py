@@ -58,6 +58,9 @@ class TrainConfig:
         pregrasp_start: the share of training resets that start the arm on the way from home to a
             pre-grasp pose above the estimated target (the env's ``pregrasp_start``, a reverse
             curriculum); periodic and final evaluations always start at home.
+        pregrasp_anneal: lower that share after each rollout to ``pregrasp_start × (1 − s)``,
+            ``s`` the success rate of the last 100 training episodes that started at home
+            (:mod:`sms3d_env.training.curriculum`); needs ``pregrasp_start`` > 0.
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
             standard deviation of 1 on every normalised command; a residual starts quieter).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
@@ -89,6 +92,7 @@ class TrainConfig:
     target_kl: float | None = None
     posture_target: str = "estimate"
     pregrasp_start: float = 0.0
+    pregrasp_anneal: bool = False
     batch_size: int = 256
     n_steps: int = 1024
     buffer_size: int = 100_000
@@ -155,6 +159,10 @@ class TrainConfig:
         if not (isinstance(self.pregrasp_start, (int, float)) and not isinstance(self.pregrasp_start, bool)
                 and 0 <= self.pregrasp_start <= 1):
             raise bad("pregrasp_start", "must be a probability in [0, 1]")
+        if not isinstance(self.pregrasp_anneal, bool):
+            raise bad("pregrasp_anneal", "must be a bool")
+        if self.pregrasp_anneal and not self.pregrasp_start:
+            raise bad("pregrasp_anneal", "lowers pregrasp_start, which is 0 (set a share > 0)")
         if not (0 < self.gamma <= 1):
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):

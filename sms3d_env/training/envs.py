@@ -29,7 +29,7 @@ def vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | N
     return make_vec_env(functools.partial(make_env, **kwargs), n_envs=n_envs, seed=seed,
                         monitor_dir=monitor_dir,
                         vec_env_cls=SubprocVecEnv if n_envs > 1 else DummyVecEnv,
-                        monitor_kwargs={"info_keywords": ("is_success", "failure_cause")})
+                        monitor_kwargs={"info_keywords": ("is_success", "failure_cause", "start")})
 
 
 def normalized(env: Any, training: bool) -> Any:

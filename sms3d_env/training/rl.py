@@ -21,6 +21,7 @@ from typing import Any
 
 from sms3d_env.training.actor import VECNORM_FILE
 from sms3d_env.training.config import TrainConfig, env_options
+from sms3d_env.training.curriculum import pregrasp_annealing
 from sms3d_env.training.envs import normalized, vec_env
 
 
@@ -134,6 +135,8 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
             callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),
                                                 str(out / "checkpoints"), name_prefix=cfg.algo,
                                                 save_vecnormalize=cfg.normalize))
+        if cfg.pregrasp_anneal:
+            callbacks.append(pregrasp_annealing(cfg.pregrasp_start))
         if cfg.max_wall_s is not None:
             callbacks.append(_wall_clock_callback(cfg.max_wall_s))
         t0 = time.perf_counter()

@@ -74,6 +74,24 @@ def test_home_starts_are_the_default_and_draw_nothing_from_the_episode_stream():
     np.testing.assert_allclose(a["joint_pos"], sms3d_env.RobotConfig().home_q, atol=0.05)
 
 
+def test_info_names_each_episodes_start_and_the_share_can_change_between_episodes():
+    env = _env()
+    try:
+        _, info = env.reset(seed=1)
+        assert info["start"] == "home"
+        assert env.step(np.zeros(7))[4]["start"] == "home"
+        # Through the wrappers, as a VecEnv's env_method reaches it.
+        env.get_wrapper_attr("set_pregrasp_start")(1.0)
+        _, info = env.reset(seed=1)
+        assert info["start"] == "pregrasp"
+        assert env.step(np.zeros(7))[4]["start"] == "pregrasp"
+        with pytest.raises(ValueError, match="pregrasp_start"):
+            env.get_wrapper_attr("set_pregrasp_start")(1.5)
+        assert env.unwrapped.pregrasp_start == 1.0
+    finally:
+        env.close()
+
+
 @settings(max_examples=20, deadline=None)
 @given(st.one_of(st.floats(max_value=-1e-9), st.floats(min_value=1.0 + 1e-9), st.just(math.nan),
                  st.just(True)))
