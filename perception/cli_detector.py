@@ -75,8 +75,9 @@ def _pipeline(args: argparse.Namespace):
     overrides = {} if args.score_threshold is None else {"score_threshold": args.score_threshold}
     detector = load_detector(args.detector, **overrides)
     soil = None if oracle or args.soil_margin_mm <= 0 else args.soil_margin_mm / 1000.0
+    edge = None if oracle or args.edge_tolerance_mm <= 0 else args.edge_tolerance_mm / 1000.0
     print(f"masks: {describe_detector(args.detector)}")
-    return PosePipeline(estimator, detector, soil_margin_m=soil), oracle
+    return PosePipeline(estimator, detector, soil_margin_m=soil, edge_tolerance_m=edge), oracle
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -144,7 +145,7 @@ def cmd_show(args: argparse.Namespace) -> int:
     pipeline, oracle = _pipeline(args)
     sample = read_scene_files(Path(args.data) / scene_dirname(args.scene))
     estimates = run_scene(pipeline, sample, oracle)
-    out = estimates_figure(sample, estimates, args.out, soil_margin_m=pipeline.soil_margin_m)
+    out = estimates_figure(sample, estimates, args.out, trim_mask=pipeline.trim_mask)
     print(f"wrote {out} ({len(estimates)} estimates)")
     return 0
 
@@ -164,6 +165,9 @@ def _pipeline_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--soil-margin-mm", type=float, default=0.0,
                    help="with a learned detector, drop mask pixels within this distance of the local soil depth (default 0: "
                         "off, as in PosePipeline; the shipped pose network was trained on the shipped segmenter's masks)")
+    p.add_argument("--edge-tolerance-mm", type=float, default=0.0,
+                   help="with a learned detector, drop mask border pixels more than this much deeper than the mask's "
+                        "interior beside them (default 0: off; 8-12 helps on clean renders, not with --realism)")
 
 
 #: ``SegmenterTrainConfig`` fields that ``train-segmenter`` exposes, with their help; each flag's

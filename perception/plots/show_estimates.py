@@ -11,6 +11,7 @@ cap proportions of the generator's models).
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -21,7 +22,7 @@ from generator.dataset.readers import SceneSample
 from generator.dataset.show import BOX_EDGES
 from generator.files import write_atomic
 from generator.geometry import OrientedBox
-from perception.pipeline import MushroomEstimate, above_soil
+from perception.pipeline import MushroomEstimate
 from perception.pointcloud import depth_to_points
 
 TRUTH_RGB = (60, 220, 60)
@@ -51,9 +52,11 @@ def _draw_boxes(img: np.ndarray, boxes: list[OrientedBox], sample: SceneSample, 
 
 
 def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out_png: str | Path,
-                     elevation: float = 30.0, azimuth: float = -65.0, soil_margin_m: float | None = None) -> Path:
+                     elevation: float = 30.0, azimuth: float = -65.0,
+                     trim_mask: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None) -> Path:
     """Write the two-panel PNG (image overlay | 3D view) of ``estimates`` on ``sample``; boxes are
-    sized from the masks trimmed as the pipeline trimmed them (``soil_margin_m``)."""
+    sized from the masks trimmed as the pipeline trimmed them (``trim_mask(mask, depth)``, e.g.
+    ``PosePipeline.trim_mask``; ``None``: whole masks)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -66,8 +69,8 @@ def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out
     predicted = []
     for est in estimates:
         mask = est.detection.mask
-        if soil_margin_m is not None:
-            mask = above_soil(mask, sample.depth, soil_margin_m)
+        if trim_mask is not None:
+            mask = trim_mask(mask, sample.depth)
         pts, _ = depth_to_points(sample.depth, intr, mask)
         predicted.append(estimate_box(est, pts @ world[:3, :3].T + world[:3, 3]))
 

@@ -2,6 +2,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from generator.camera import project
 from perception.detection.detector import Detection, detections_from_labels
@@ -13,6 +15,7 @@ from perception.pipeline import (
     PosePipeline,
     above_soil,
     estimate_cap_top,
+    within_depth_of_core,
 )
 from perception.pose.estimator import PoseEstimator
 from perception.pose.pose_net import PoseNet, PoseNetConfig
@@ -129,6 +132,52 @@ def test_above_soil_trims_a_mask_that_spills_onto_the_soil():
     spilled = (yy - 30) ** 2 + (xx - 40) ** 2 <= 13 ** 2
     assert np.array_equal(above_soil(spilled, depth, 0.006), cap)
     assert np.array_equal(above_soil(cap, np.zeros_like(depth), 0.006), cap)  # no depth around: unchanged
+
+
+def _dome_over_soil():
+    """A cap of radius 10 px whose rim falls away 4 mm from its centre, 3 cm above the soil."""
+    yy, xx = np.mgrid[:60, :80]
+    r2 = (yy - 30) ** 2 + (xx - 40) ** 2
+    depth = np.full((60, 80), 0.40, np.float32)
+    cap = r2 <= 10 ** 2
+    depth[cap] = 0.37 + 0.004 * r2[cap] / 100.0
+    return depth, cap, r2
+
+
+def test_within_depth_of_core_drops_the_soil_beyond_a_rim_and_keeps_the_rim():
+    depth, cap, r2 = _dome_over_soil()
+    spilled = r2 <= 12 ** 2  # two pixels over the rim
+    assert np.array_equal(within_depth_of_core(spilled, depth, 0.008), cap)
+    # A tolerance under the rim's own fall (1.4 mm over its last two pixels) cuts into the cap.
+    assert np.array_equal(within_depth_of_core(cap, depth, 0.008), cap)
+    tight = within_depth_of_core(cap, depth, 0.001)
+    assert tight.sum() < cap.sum() and not (tight & ~cap).any()
+    tiny = r2 <= 2 ** 2  # too small an interior to judge by: unchanged
+    assert np.array_equal(within_depth_of_core(tiny, depth, 0.008), tiny)
+
+
+def test_the_pipeline_cuts_its_clouds_from_the_trimmed_masks():
+    depth, cap, r2 = _dome_over_soil()
+    spilled = r2 <= 12 ** 2
+    whole = PosePipeline(None, detector=None)  # type: ignore[arg-type]
+    assert np.array_equal(whole.trim_mask(spilled, depth), spilled)
+    trimmed = PosePipeline(None, detector=None, edge_tolerance_m=0.008)  # type: ignore[arg-type]
+    assert np.array_equal(trimmed.trim_mask(spilled, depth), cap)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.0, 0.05))
+def test_within_depth_of_core_only_removes_border_pixels(seed, tolerance):
+    rng = np.random.default_rng(seed)
+    depth = rng.uniform(0.3, 0.5, (40, 50)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.1] = 0.0  # invalid pixels
+    mask = rng.random(depth.shape) < 0.7
+    out = within_depth_of_core(mask, depth, tolerance)
+    assert not (out & ~mask).any()
+    import cv2
+
+    core = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    assert (out[core] | ~mask[core]).all()
 
 
 def test_cap_top_is_the_apex_of_a_dome_seen_from_one_side() -> None:
