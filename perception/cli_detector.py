@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -42,6 +43,17 @@ def _clear_errors(func):
             return 2
 
     return run
+
+
+def millimetres(text: str) -> float:
+    """argparse type of mask trims in millimetres: a finite number >= 0 (0: off)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of millimetres, got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0 (0: off), got {text}")
+    return value
 
 
 def _positive_int(text: str) -> int:
@@ -165,7 +177,7 @@ def _pipeline_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--soil-margin-mm", type=float, default=0.0,
                    help="with a learned detector, drop mask pixels within this distance of the local soil depth (default 0: "
                         "off, as in PosePipeline; the shipped pose network was trained on the shipped segmenter's masks)")
-    p.add_argument("--edge-tolerance-mm", type=float, default=0.0,
+    p.add_argument("--edge-tolerance-mm", type=millimetres, default=0.0,
                    help="with a learned detector, drop mask border pixels more than this much deeper than the mask's "
                         "interior beside them (default 0: off; 8-12 helps on clean renders, not with --realism)")
 

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from perception.choices import BACKBONE_NAMES, HEAD_NAMES, ROTATION_LOSSES
+from perception.cli_detector import millimetres
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 from perception.pose.config import PoseNetConfig, TrainConfig
 
@@ -72,14 +73,24 @@ def _scene_samples(args: argparse.Namespace, split: str, seed: int) -> list:
     from perception.pose.data import samples_from_detections, samples_from_scenes
 
     if args.masks == "oracle":
+        if args.edge_tolerance_mm:
+            raise PerceptionConfigError("--edge-tolerance-mm", "trims a detector's masks; needs --masks shipped or a checkpoint")
         return [s for root in args.scenes for s in samples_from_scenes(root, split, cap_only=args.cap_only, seed=seed)]
     if args.cap_only:
         raise PerceptionConfigError("--cap-only", "needs --masks oracle (detectors find whole mushrooms)")
     from perception.detection.load import load_detector
 
     detector = load_detector(args.masks)
+    trim = None
+    if args.edge_tolerance_mm > 0:
+        from perception.pipeline import within_depth_of_core
+
+        def trim(mask, depth):
+            return within_depth_of_core(mask, depth, args.edge_tolerance_mm / 1000.0)
+
     return [s for root in args.scenes
-            for s in samples_from_detections(root, split, detector, seed=seed, progress=not args.quiet)]
+            for s in samples_from_detections(root, split, detector, seed=seed, progress=not args.quiet,
+                                             trim_mask=trim)]
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -187,6 +198,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="with --scenes: whose masks cut out each mushroom's points: 'oracle' (the renderer's, default), "
                         "'shipped' (the shipped RGB-D segmenter's, matched to the truth by IoU >= 0.5) or a detector "
                         "checkpoint")
+    p.add_argument("--edge-tolerance-mm", type=millimetres, default=0.0,
+                   help="with a detector's --masks: cut each mask as `eval-pipeline --edge-tolerance-mm` does "
+                        "(border pixels this much deeper than the interior dropped; default 0: whole masks)")
     p.add_argument("--cap-only", action="store_true", help="with --scenes and oracle masks: cap points only")
     p.add_argument("--cache", help="folder to cache rendered views as .npz")
     p.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this wall time")

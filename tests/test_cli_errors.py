@@ -34,6 +34,9 @@ CASES = [
     (["scene", "--out", ""], "--out"),
     (["scene", "--config", "{ranges}", "--out", "{out}"], "placement.x_range"),
     (["show", "{out}", "--scene", "0", "--out", ""], "--out"),
+    (["eval-pipeline", "--data", "{out}", "--edge-tolerance-mm", "-1"], "--edge-tolerance-mm"),
+    (["eval-pipeline", "--data", "{out}", "--edge-tolerance-mm", "nan"], "--edge-tolerance-mm"),
+    (["train-pose", "--out", "{out}", "--scenes", "{out}", "--edge-tolerance-mm", "8"], "--edge-tolerance-mm"),
 ]
 
 
