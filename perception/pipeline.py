@@ -140,9 +140,10 @@ class PosePipeline:
     network, which was trained on the shipped segmenter's masks (9.5° -> 9.8° clean, and recall
     0.973 -> 0.944). ``edge_tolerance_m`` drops border pixels deeper than the mask's interior
     beside them by more than that (``within_depth_of_core``; ``None``, the default, keeps masks
-    whole): on clean renders it lowers the shipped network's mean stem-axis error (9.0° -> 8.3°
-    at 8-12 mm, first 10 clean held-out beds) and the stage-5 network's (30° -> 8.4°), but it
-    raises the shipped network's under the camera model (14.9° -> 17.1-17.8°), so it is off by
+    whole). Measured on the 50 clean held-out beds at 10 mm (benchmarks/RESULTS.md): it helps
+    fully visible caps (shipped network 6.9° -> 4.9° mean stem-axis error; the stage-5 network,
+    trained on exact masks, 30° -> 8.9° overall) and hurts occluded ones (21.5° -> 27.4° below
+    half visible), 9.0° -> 8.9° in all; under the camera model 15.7° -> 18.0°, so it is off by
     default. ``erode_px`` trims mask borders; it
     is 0 by default because the shipped network was fine-tuned on un-eroded masks (1 px of erosion
     raised its error with exact masks from 9.2° to 12.5°).
