@@ -150,6 +150,23 @@ def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
     assert "pregrasp_start" not in TrainConfig().env_kwargs()
 
 
+def test_annealing_reaches_the_training_envs_through_their_wrappers(tmp_path):
+    """Two vectorised, normalised envs: each rollout's share is set in both (by env_method through
+    VecNormalize, the monitor and gymnasium's wrappers) and logged; home starts are recorded."""
+    import csv
+
+    cfg = TrainConfig(algo="ppo", total_steps=256, n_steps=64, batch_size=64, n_envs=2, normalize=True,
+                      pregrasp_start=0.5, pregrasp_anneal=True, out=str(tmp_path),
+                      **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
+    train_policy(cfg)
+    rows = list(csv.DictReader((tmp_path / "progress.csv").open()))
+    shares = [float(r["curriculum/pregrasp_start"]) for r in rows if r.get("curriculum/pregrasp_start")]
+    assert shares and all(v == 0.5 for v in shares)  # no home start has succeeded yet
+    starts = [row["start"] for f in sorted((tmp_path / "monitor").glob("*.monitor.csv"))
+              for row in csv.DictReader(f.read_text().splitlines()[1:])]  # line 1: the monitor's header
+    assert starts and set(starts) <= {"home", "pregrasp"}
+
+
 def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
     """``best/best_model.zip`` loads like the final model: its VecNormalize statistics and the
     run's config.json lie beside it (they were missing, and the statistics drift after the best)."""
