@@ -13,33 +13,39 @@ from pathlib import Path
 from typing import Any
 
 EVAL_COLUMN, STEPS_COLUMN, WALL_COLUMN = "eval/success_rate", "time/total_timesteps", "time/time_elapsed"
+SHARE_COLUMN = "curriculum/pregrasp_start"  # written by --pregrasp-anneal
 
 
 def read_curve(run: str | Path) -> list[dict[str, float]]:
-    """``[{"steps", "wall_s", "success"}]`` per periodic evaluation of a run folder, in order.
+    """``[{"steps", "wall_s", "success", "pregrasp_start"}]`` per periodic evaluation of a run
+    folder, in order.
 
-    SB3 writes the evaluation and the rollout statistics on separate rows; the wall time of an
-    evaluation row is the latest one logged before it (FileNotFoundError / ValueError name the
-    file when it is missing or has no evaluation)."""
+    SB3 writes the evaluation and the rollout statistics on separate rows; the wall time and the
+    annealed curriculum share (NaN for a run without ``--pregrasp-anneal``) of an evaluation row
+    are the latest ones logged before it (FileNotFoundError / ValueError name the file when it is
+    missing or has no evaluation)."""
     path = Path(run) / "progress.csv"
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no progress.csv (is {run} a train-policy run folder?)")
     points: list[dict[str, float]] = []
-    wall = math.nan
+    wall = share = math.nan
     with open(path, newline="") as f:
         for row in csv.DictReader(f):
             if row.get(WALL_COLUMN):
                 wall = float(row[WALL_COLUMN])
+            if row.get(SHARE_COLUMN):
+                share = float(row[SHARE_COLUMN])
             if row.get(EVAL_COLUMN):
                 points.append({"steps": float(row[STEPS_COLUMN]), "wall_s": wall,
-                               "success": float(row[EVAL_COLUMN])})
+                               "success": float(row[EVAL_COLUMN]), "pregrasp_start": share})
     if not points:
         raise ValueError(f"{path}: no {EVAL_COLUMN} rows (was --eval-freq 0?)")
     return points
 
 
 def plot_curves(runs: dict[str, list[dict[str, float]]], path: str | Path) -> None:
-    """Two panels: success against env steps and against wall time, one line per run."""
+    """Two panels: success against env steps and against wall time, one line per run; a run with
+    an annealed curriculum also gets its share of curriculum starts, dashed, in the first."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -50,11 +56,14 @@ def plot_curves(runs: dict[str, list[dict[str, float]]], path: str | Path) -> No
     fig, (by_steps, by_wall) = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for label, points in runs.items():
         y = [100 * p["success"] for p in points]
-        by_steps.plot([p["steps"] / 1e3 for p in points], y, marker=".", label=label)
+        (line,) = by_steps.plot([p["steps"] / 1e3 for p in points], y, marker=".", label=label)
+        if any(math.isfinite(p["pregrasp_start"]) for p in points):
+            by_steps.plot([p["steps"] / 1e3 for p in points], [100 * p["pregrasp_start"] for p in points],
+                          linestyle="--", color=line.get_color(), label=f"{label}: curriculum starts (%)")
         by_wall.plot([p["wall_s"] / 60 for p in points], y, marker=".", label=label)
     by_steps.set_xlabel("env steps (thousands)")
     by_wall.set_xlabel("wall time (minutes)")
-    by_steps.set_ylabel("periodic evaluation success (%)")
+    by_steps.set_ylabel("periodic evaluation success from home (%)")
     for ax in (by_steps, by_wall):
         ax.set_ylim(-2, 102)
         ax.grid(alpha=0.3)

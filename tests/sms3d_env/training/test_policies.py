@@ -5,6 +5,7 @@ episodes; the shipped policy loads without a download."""
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -104,9 +105,17 @@ def test_learning_curve_reads_evaluations_with_their_wall_time(tmp_path, capsys)
     (run / "progress.csv").write_text(
         "time/total_timesteps,time/time_elapsed,eval/success_rate\n"
         "2048,10,\n4096,,0.25\n6144,31,\n8192,,0.5\n")
-    assert read_curve(run) == [{"steps": 4096.0, "wall_s": 10.0, "success": 0.25},
-                               {"steps": 8192.0, "wall_s": 31.0, "success": 0.5}]
-    assert main(["learning-curve", str(run), "--out", str(tmp_path / "c.png")]) == 0
+    curve = read_curve(run)
+    assert [{k: p[k] for k in ("steps", "wall_s", "success")} for p in curve] == [
+        {"steps": 4096.0, "wall_s": 10.0, "success": 0.25}, {"steps": 8192.0, "wall_s": 31.0, "success": 0.5}]
+    assert all(math.isnan(p["pregrasp_start"]) for p in curve)  # no annealed curriculum
+    annealed = tmp_path / "ppo_anneal_s0"
+    annealed.mkdir()
+    (annealed / "progress.csv").write_text(
+        "time/total_timesteps,time/time_elapsed,curriculum/pregrasp_start,eval/success_rate\n"
+        "2048,10,0.75,\n4096,,,0.25\n6144,31,0.5,\n8192,,,0.5\n")
+    assert [p["pregrasp_start"] for p in read_curve(annealed)] == [0.75, 0.5]
+    assert main(["learning-curve", str(run), str(annealed), "--out", str(tmp_path / "c.png")]) == 0
     assert "| ppo_s0 | 2 | 8192 |" in capsys.readouterr().out
     assert (tmp_path / "c.png").stat().st_size > 5_000
     (run / "progress.csv").write_text("time/total_timesteps,time/time_elapsed\n2048,10\n")
