@@ -2,10 +2,11 @@
 saved SB3 policy; no path: the shipped one) or ``"residual:PATH"`` (a residual policy on top of
 the scripted picker).
 
-A learned picker runs on the env id and options it was trained with (``config.json`` beside the
-model), so ``make_picker_env`` builds that env; every reset draws the same scene, target and pose
-estimate from the same seed whatever the picker (the options change the episode, not its draw),
-which keeps the study's design paired.
+A learned picker runs on the env id and options it was trained with (the ``config.json`` of its
+run: beside the model or, for a checkpoint, in its run folder), so ``make_picker_env`` builds
+that env; every reset draws the same scene, target and pose estimate from the same seed
+whatever the picker (the options change the episode, not its draw), which keeps the study's
+design paired.
 """
 
 from __future__ import annotations

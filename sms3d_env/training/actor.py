@@ -16,14 +16,43 @@ SHIPPED_POLICY = Path(__file__).parents[1] / "weights" / "pick_policy" / "model.
 VECNORM_FILE = "vecnormalize.pkl"
 
 
+def _checkpoint_parts(path: Path) -> tuple[str, str] | None:
+    """``("ppo", "1400000_steps")`` for SB3 ``CheckpointCallback``'s ``ppo_1400000_steps.zip``."""
+    algo, _, rest = path.stem.partition("_")
+    return (algo, rest) if rest.endswith("_steps") and rest[: -len("_steps")].isdigit() else None
+
+
+def saved_config_path(model_path: str | Path) -> Path | None:
+    """The ``config.json`` of a model's run: beside it, or for a checkpoint in the run's
+    ``checkpoints/`` folder the run folder's; ``None`` when there is none."""
+    path = Path(model_path)
+    for folder in (path.parent, path.parent.parent if _checkpoint_parts(path) else None):
+        if folder is not None and (folder / "config.json").is_file():
+            return folder / "config.json"
+    return None
+
+
+def observation_stats_path(model_path: str | Path) -> Path | None:
+    """The ``VecNormalize`` statistics saved with a model: ``vecnormalize.pkl`` beside it, or for
+    a checkpoint ``<algo>_<N>_steps.zip`` its ``<algo>_vecnormalize_<N>_steps.pkl`` (SB3's
+    ``CheckpointCallback`` naming); ``None`` when there are none."""
+    path = Path(model_path)
+    beside = path.parent / VECNORM_FILE
+    if beside.is_file():
+        return beside
+    parts = _checkpoint_parts(path)
+    checkpoint = None if parts is None else path.parent / f"{parts[0]}_vecnormalize_{parts[1]}.pkl"
+    return checkpoint if checkpoint is not None and checkpoint.is_file() else None
+
+
 def load_model(model_path: str | Path, algo: str | None = None) -> Any:
     """Load a saved PPO/SAC model; the algorithm comes from ``config.json`` beside it if not given."""
     from stable_baselines3 import PPO, SAC
 
     path = Path(model_path)
     if algo is None:
-        cfg_file = path.parent / "config.json"
-        if cfg_file.exists():
+        cfg_file = saved_config_path(path)
+        if cfg_file is not None:
             algo = json.loads(cfg_file.read_text()).get("algo")
     if algo is not None:
         if algo not in ALGOS:
@@ -36,27 +65,27 @@ def load_model(model_path: str | Path, algo: str | None = None) -> Any:
 
 
 class PolicyActor:
-    """A saved SB3 model as ``actor(obs) -> action``, its observation statistics applied when a
-    ``vecnormalize.pkl`` lies beside it. ``env_id``/``env_options``: what it was trained on
-    (``config.json`` beside the model; ``SMS3DPick-v0`` with no options if there is none)."""
+    """A saved SB3 model as ``actor(obs) -> action``, its observation statistics applied when they
+    were saved with it (:func:`observation_stats_path`). ``env_id``/``env_options``: what it was trained on
+    (:func:`saved_config_path`; ``SMS3DPick-v0`` with no options if there is none)."""
 
     def __init__(self, model_path: str | Path, algo: str | None = None, deterministic: bool = True) -> None:
         path = Path(model_path)
         if not path.is_file():
             raise FileNotFoundError(f"model not found: {path}")
         self.path, self.deterministic = path, deterministic
-        self.saved: dict[str, Any] = {}
-        if (path.parent / "config.json").is_file():
-            self.saved = json.loads((path.parent / "config.json").read_text())
+        cfg_file = saved_config_path(path)
+        self.saved: dict[str, Any] = {} if cfg_file is None else json.loads(cfg_file.read_text())
         self.env_id = self.saved.get("env_id", "SMS3DPick-v0")
         self.env_options = dict(self.saved.get("env_options", {}))
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
         self.model = load_model(path, algo)
         self.obs_stats = None
-        if (path.parent / VECNORM_FILE).is_file():
+        stats = observation_stats_path(path)
+        if stats is not None:
             import pickle
 
-            with open(path.parent / VECNORM_FILE, "rb") as f:
+            with open(stats, "rb") as f:
                 self.obs_stats = pickle.load(f)  # SB3 VecNormalize, saved by train_policy
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:

@@ -18,7 +18,7 @@ from sms3d_env.training.config import (
 )
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
 from sms3d_env.training.imitation import TEACHERS
-from sms3d_env.training.rl import train_policy
+from sms3d_env.training.rl import InitModelError, train_policy
 
 
 def _cmd_train(args: Any) -> int:
@@ -40,11 +40,16 @@ def _cmd_train(args: Any) -> int:
                           out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
                           checkpoint_freq=args.checkpoint_freq, learning_rate=args.learning_rate,
                           target_kl=args.target_kl, posture_target=args.posture_target,
-                          pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal)
+                          pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
+                          init_model=args.init_model)
     except ValueError as e:
         print(f"error: {e}")
         return 2
-    summary = train_policy(cfg)
+    try:
+        summary = train_policy(cfg)
+    except InitModelError as e:  # raised before any training
+        print(f"error: {e}")
+        return 2
     print(json.dumps(summary, indent=2))
     return 0
 
@@ -55,6 +60,9 @@ def _cmd_train_bc(args: Any) -> int:
     if args.pregrasp_start or args.pregrasp_anneal:
         print("error: --pregrasp-start and --pregrasp-anneal apply to the rl and residual recipes "
               "(the bc recipe's demonstrations start at home)")
+        return 2
+    if args.init_model:
+        print("error: --init-model applies to the rl and residual recipes (the bc recipe clones from scratch)")
         return 2
     try:
         cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
@@ -131,6 +139,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--pregrasp-anneal", action="store_true",
                    help="rl/residual: lower that share as training episodes from home succeed: "
                         "P x (1 - success of the last 100 home starts), set after each rollout")
+    p.add_argument("--init-model", default=None, metavar="PATH",
+                   help="rl/residual: start from this saved model (model.zip, a checkpoint or best/best_model.zip; "
+                        "its observation statistics too with --normalize) instead of a fresh policy")
     p.add_argument("--learning-rate", type=float, default=defaults.learning_rate, help="rl/residual: the optimiser's rate")
     p.add_argument("--target-kl", type=float, default=None,
                    help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "

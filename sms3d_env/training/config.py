@@ -61,6 +61,10 @@ class TrainConfig:
         pregrasp_anneal: lower that share after each rollout to ``pregrasp_start × (1 − s)``,
             ``s`` the success rate of the last 100 training episodes that started at home
             (:mod:`sms3d_env.training.curriculum`); needs ``pregrasp_start`` > 0.
+        init_model: a saved model of this algorithm and architecture (``model.zip``, a checkpoint,
+            ``best/best_model.zip``) whose weights, and with ``normalize`` observation
+            statistics, the run starts from instead of a fresh policy (e.g. a second phase at a
+            lower learning rate); ``None``: from scratch.
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
             standard deviation of 1 on every normalised command; a residual starts quieter).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
@@ -93,6 +97,7 @@ class TrainConfig:
     posture_target: str = "estimate"
     pregrasp_start: float = 0.0
     pregrasp_anneal: bool = False
+    init_model: str | None = None
     batch_size: int = 256
     n_steps: int = 1024
     buffer_size: int = 100_000
@@ -163,6 +168,8 @@ class TrainConfig:
             raise bad("pregrasp_anneal", "must be a bool")
         if self.pregrasp_anneal and not self.pregrasp_start:
             raise bad("pregrasp_anneal", "lowers pregrasp_start, which is 0 (set a share > 0)")
+        if self.init_model is not None and not (isinstance(self.init_model, str) and self.init_model):
+            raise bad("init_model", "must be None or the path of a saved model")
         if not (0 < self.gamma <= 1):
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):

@@ -24,7 +24,7 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
     """Success of a saved policy over seeded episodes with oracle (0 deg) or noisy target poses.
 
     ``model_path`` None: the shipped policy. The env is the id and options the policy was trained
-    with (``config.json`` beside the model) on ``num_mushrooms``-mushroom beds (default: the
+    with (the ``config.json`` of its run) on ``num_mushrooms``-mushroom beds (default: the
     single bed size it was trained on, else 25, the registered env's — so the shipped policy,
     trained on 10 and 25, is evaluated on 25). Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for
     every model and pose error.

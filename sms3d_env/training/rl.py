@@ -19,7 +19,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from sms3d_env.training.actor import VECNORM_FILE
+from sms3d_env.training.actor import VECNORM_FILE, observation_stats_path
 from sms3d_env.training.config import TrainConfig, env_options
 from sms3d_env.training.curriculum import pregrasp_annealing
 from sms3d_env.training.envs import normalized, vec_env
@@ -46,6 +46,32 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
     return SAC("MultiInputPolicy", env, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
                policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
+
+
+class InitModelError(ValueError):
+    """``TrainConfig.init_model`` is missing, lacks its observation statistics or does not fit."""
+
+
+def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:
+    """``cfg.init_model``: its weights into ``model`` and, with ``normalize``, its observation
+    statistics into ``env`` (``InitModelError`` naming the file)."""
+    import pickle
+
+    path = Path(cfg.init_model)
+    if not path.is_file():
+        raise InitModelError(f"TrainConfig.init_model: no saved model at {path}")
+    try:
+        model.set_parameters(str(path), exact_match=True, device=cfg.device)
+    except (ValueError, RuntimeError, KeyError) as exc:
+        raise InitModelError(f"TrainConfig.init_model: {path} does not fit a {cfg.algo} policy with "
+                         f"net_arch {list(cfg.net_arch)} on {cfg.env_id} ({exc})") from None
+    if cfg.normalize:
+        stats = observation_stats_path(path)
+        if stats is None:
+            raise InitModelError(f"TrainConfig.init_model: no observation statistics saved with {path} "
+                                    f"(normalize=True needs {VECNORM_FILE} or the checkpoint's own)")
+        with open(stats, "rb") as f:
+            env.obs_rms = pickle.load(f).obs_rms
 
 
 def _save_beside_best(env: Any, out: Path) -> Any:
@@ -113,6 +139,8 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
     eval_env = None
     try:
         model = _build_model(cfg, env)
+        if cfg.init_model is not None:
+            _start_from(model, env, cfg)
         formats = ["stdout", "csv"] + (["tensorboard"] if _tensorboard_available() else [])
         if not cfg.verbose:
             formats.remove("stdout")

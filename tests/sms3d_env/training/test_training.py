@@ -219,3 +219,52 @@ def test_module_main_eval_policy(ppo_run, tmp_path, capsys):
                  "--json", str(out)]) == 0
     assert json.loads(out.read_text())["episodes"] == 1
     assert main(["eval-policy", "--model", str(tmp_path / "missing.zip")]) == 2
+
+
+def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_like_its_run(tmp_path):
+    """``init_model``: a checkpoint's weights and observation statistics become the new run's
+    start; a checkpoint alone is rebuilt with its run's env (config.json one folder up)."""
+    import pickle
+
+    import numpy as np
+    from sms3d_env.training.actor import PolicyActor, observation_stats_path, saved_config_path
+    from sms3d_env.training.envs import normalized, vec_env
+    from sms3d_env.training.rl import InitModelError, _build_model, _start_from
+
+    first = tmp_path / "first"
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", total_steps=128, n_steps=128, batch_size=64,
+                      normalize=True, out=str(first), **{**FAST, "eval_freq": 0})
+    train_policy(cfg)
+    checkpoint = first / "checkpoints" / "ppo_128_steps.zip"
+    assert saved_config_path(checkpoint) == first / "config.json"
+    assert observation_stats_path(checkpoint) == first / "checkpoints" / "ppo_vecnormalize_128_steps.pkl"
+    actor = PolicyActor(checkpoint)
+    assert actor.env_id == "SMS3DPickTrain-v0" and actor.obs_stats is not None
+
+    again = TrainConfig(**{**cfg.__dict__, "out": str(tmp_path / "second"), "init_model": str(checkpoint)})
+    env = normalized(vec_env(again.env_kwargs(), 1, 0, None), training=True)
+    try:
+        model = _build_model(again, env)
+        _start_from(model, env, again)
+        saved = load_model(checkpoint)
+        for a, b in zip(model.policy.parameters(), saved.policy.parameters(), strict=True):
+            assert np.array_equal(a.detach().numpy(), b.detach().numpy())
+        with open(observation_stats_path(checkpoint), "rb") as f:
+            stats = pickle.load(f).obs_rms
+        assert all(np.array_equal(env.obs_rms[k].mean, stats[k].mean) for k in stats)
+
+        with pytest.raises(InitModelError, match="no saved model"):
+            _start_from(model, env, TrainConfig(**{**again.__dict__, "init_model": str(tmp_path / "none.zip")}))
+        wider = TrainConfig(**{**again.__dict__, "net_arch": (64, 64)})
+        with pytest.raises(InitModelError, match="does not fit"):
+            _start_from(_build_model(wider, env), env, wider)
+    finally:
+        env.close()
+
+
+def test_the_bc_recipe_refuses_an_initial_model(capsys):
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="cmd"))
+    a = parser.parse_args(["train-policy", "--recipe", "bc", "--init-model", "runs/x/model.zip"])
+    assert a.func(a) == 2
+    assert "--init-model" in capsys.readouterr().out
