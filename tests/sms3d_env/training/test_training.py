@@ -227,6 +227,7 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     import pickle
 
     import numpy as np
+
     from sms3d_env.training.actor import PolicyActor, observation_stats_path, saved_config_path
     from sms3d_env.training.envs import normalized, vec_env
     from sms3d_env.training.rl import InitModelError, _build_model, _start_from
