@@ -22,6 +22,12 @@ def _checkpoint_parts(path: Path) -> tuple[str, str] | None:
     return (algo, rest) if rest.endswith("_steps") and rest[: -len("_steps")].isdigit() else None
 
 
+def checkpoint_steps(path: str | Path) -> int | None:
+    """The env steps in a ``CheckpointCallback`` file name (``ppo_1400000_steps.zip`` -> 1400000)."""
+    parts = _checkpoint_parts(Path(path))
+    return None if parts is None else int(parts[1][: -len("_steps")])
+
+
 def saved_config_path(model_path: str | Path) -> Path | None:
     """The ``config.json`` of a model's run: beside it, or for a checkpoint in the run's
     ``checkpoints/`` folder the run folder's; ``None`` when there is none."""

@@ -2,15 +2,20 @@
 env steps and wall time, read from each run's ``progress.csv`` (SB3's CSV logger).
 
 ``sms3d learning-curve RUN [RUN ...] --out curve.png`` draws them side by side (one line per run,
-e.g. one per training seed) and prints the table.
+e.g. one per training seed) and prints the table. A run started from a checkpoint of another
+(``--init-model RUN0/checkpoints/ppo_<N>_steps.zip``) is drawn as that run's curve up to ``N``
+followed by its own, its steps and wall time counted on from there: one curve per training.
 """
 
 from __future__ import annotations
 
 import csv
+import json
 import math
 from pathlib import Path
 from typing import Any
+
+from sms3d_env.training.actor import checkpoint_steps
 
 EVAL_COLUMN, STEPS_COLUMN, WALL_COLUMN = "eval/success_rate", "time/total_timesteps", "time/time_elapsed"
 SHARE_COLUMN = "curriculum/pregrasp_start"  # written by --pregrasp-anneal
@@ -40,7 +45,36 @@ def read_curve(run: str | Path) -> list[dict[str, float]]:
                                "success": float(row[EVAL_COLUMN]), "pregrasp_start": share})
     if not points:
         raise ValueError(f"{path}: no {EVAL_COLUMN} rows (was --eval-freq 0?)")
-    return points
+    start = _started_from(Path(run))
+    if start is None:
+        return points
+    parent, steps = start
+    before = [p for p in read_curve(parent) if p["steps"] <= steps]
+    wall = _wall_at(parent, steps)
+    return before + [{**p, "steps": p["steps"] + steps, "wall_s": p["wall_s"] + wall} for p in points]
+
+
+def _started_from(run: Path) -> tuple[Path, int] | None:
+    """``(run folder, steps)`` of the checkpoint a run was started from (``init_model``), if any."""
+    config = run / "config.json"
+    init = json.loads(config.read_text()).get("init_model") if config.is_file() else None
+    if not init:
+        return None
+    path = Path(init)
+    steps = checkpoint_steps(path)
+    if steps is None or path.parent.name != "checkpoints" or not (path.parent.parent / "progress.csv").is_file():
+        return None
+    return path.parent.parent, steps
+
+
+def _wall_at(run: Path, steps: int) -> float:
+    """The last wall time a run logged at or before ``steps`` env steps."""
+    wall = 0.0
+    with open(run / "progress.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            if row.get(WALL_COLUMN) and float(row[STEPS_COLUMN]) <= steps:
+                wall = float(row[WALL_COLUMN])
+    return wall
 
 
 def plot_curves(runs: dict[str, list[dict[str, float]]], path: str | Path) -> None:

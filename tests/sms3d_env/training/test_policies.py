@@ -118,6 +118,15 @@ def test_learning_curve_reads_evaluations_with_their_wall_time(tmp_path, capsys)
     assert main(["learning-curve", str(run), str(annealed), "--out", str(tmp_path / "c.png")]) == 0
     assert "| ppo_s0 | 2 | 8192 |" in capsys.readouterr().out
     assert (tmp_path / "c.png").stat().st_size > 5_000
+    # A second phase started from the annealed run's 6144-step checkpoint continues its curve.
+    second = tmp_path / "phase2"
+    second.mkdir()
+    (second / "config.json").write_text(json.dumps(
+        {"init_model": str(annealed / "checkpoints" / "ppo_6144_steps.zip")}))
+    (second / "progress.csv").write_text(
+        "time/total_timesteps,time/time_elapsed,eval/success_rate\n2048,5,\n4096,,0.75\n")
+    assert [(p["steps"], p["wall_s"], p["success"]) for p in read_curve(second)] == [
+        (4096.0, 10.0, 0.25), (6144.0 + 4096.0, 31.0 + 5.0, 0.75)]
     (run / "progress.csv").write_text("time/total_timesteps,time/time_elapsed\n2048,10\n")
     with pytest.raises(ValueError, match="progress.csv"):
         read_curve(run)
