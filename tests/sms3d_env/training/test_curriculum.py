@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 from types import SimpleNamespace
 
 import pytest
@@ -10,7 +9,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 from stable_baselines3.common.logger import Logger
 
-from sms3d_env.training.cli import register
 from sms3d_env.training.config import TrainConfig
 from sms3d_env.training.curriculum import (
     HOME_WINDOW,
@@ -69,11 +67,3 @@ def test_annealing_needs_a_curriculum_share():
     with pytest.raises(ValueError, match="TrainConfig.pregrasp_anneal"):
         TrainConfig(pregrasp_start=0.5, pregrasp_anneal=1)  # type: ignore[arg-type]
     assert TrainConfig(pregrasp_start=0.5, pregrasp_anneal=True).env_kwargs()["pregrasp_start"] == 0.5
-
-
-def test_the_bc_recipe_refuses_annealing(capsys):
-    parser = argparse.ArgumentParser()
-    register(parser.add_subparsers(dest="cmd"))
-    a = parser.parse_args(["train-policy", "--recipe", "bc", "--pregrasp-anneal"])
-    assert a.func(a) == 2
-    assert "--pregrasp-anneal" in capsys.readouterr().out

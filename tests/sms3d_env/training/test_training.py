@@ -180,12 +180,14 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
     assert (tmp_path / "best" / "config.json").read_text() == (tmp_path / "config.json").read_text()
 
 
-def test_the_bc_recipe_refuses_pregrasp_starts(capsys):
+@pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
+                                  ["--init-model", "runs/x/model.zip"]], ids=lambda f: f[0])
+def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="cmd"))
-    a = parser.parse_args(["train-policy", "--recipe", "bc", "--pregrasp-start", "0.5"])
+    a = parser.parse_args(["train-policy", "--recipe", "bc", *flag])
     assert a.func(a) == 2
-    assert "--pregrasp-start" in capsys.readouterr().out
+    assert flag[0] in capsys.readouterr().out
 
 
 def test_eval_rejects_bad_arguments(tmp_path):
@@ -262,10 +264,3 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     finally:
         env.close()
 
-
-def test_the_bc_recipe_refuses_an_initial_model(capsys):
-    parser = argparse.ArgumentParser()
-    register(parser.add_subparsers(dest="cmd"))
-    a = parser.parse_args(["train-policy", "--recipe", "bc", "--init-model", "runs/x/model.zip"])
-    assert a.func(a) == 2
-    assert "--init-model" in capsys.readouterr().out
