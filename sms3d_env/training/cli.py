@@ -39,6 +39,7 @@ def _cmd_train(args: Any) -> int:
                           reward_type=args.reward_type, num_mushrooms=args.num_mushrooms, seed=args.seed,
                           out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
                           checkpoint_freq=args.checkpoint_freq, learning_rate=args.learning_rate,
+                          learning_rate_final=args.learning_rate_final,
                           target_kl=args.target_kl, posture_target=args.posture_target,
                           pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
                           init_model=args.init_model)
@@ -60,6 +61,10 @@ def _cmd_train_bc(args: Any) -> int:
     if args.pregrasp_start or args.pregrasp_anneal:
         print("error: --pregrasp-start and --pregrasp-anneal apply to the rl and residual recipes "
               "(the bc recipe's demonstrations start at home)")
+        return 2
+    if args.learning_rate_final is not None:
+        print("error: --learning-rate-final applies to the rl and residual recipes (the bc recipe's "
+              "cloning uses a constant rate)")
         return 2
     if args.init_model:
         print("error: --init-model applies to the rl and residual recipes (the bc recipe clones from scratch)")
@@ -143,6 +148,9 @@ def register(subparsers: Any) -> None:
                    help="rl/residual: start from this saved model (model.zip, a checkpoint or best/best_model.zip; "
                         "its observation statistics too with --normalize) instead of a fresh policy")
     p.add_argument("--learning-rate", type=float, default=defaults.learning_rate, help="rl/residual: the optimiser's rate")
+    p.add_argument("--learning-rate-final", type=float, default=None, metavar="RATE",
+                   help="rl/residual: fall linearly from --learning-rate to this by the last of --steps "
+                        "(default: a constant rate)")
     p.add_argument("--target-kl", type=float, default=None,
                    help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "
                         "passes 1.5 x this (default: no limit)")

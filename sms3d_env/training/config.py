@@ -48,6 +48,10 @@ class TrainConfig:
         eval_episodes: episodes per periodic evaluation (oracle poses, same scenes per eval).
         learning_rate, batch_size, n_steps (PPO, per env), buffer_size and learning_starts (SAC),
         gamma, net_arch: algorithm hyper-parameters.
+        learning_rate_final: ``None``: a constant ``learning_rate``; else the rate falls linearly
+            from ``learning_rate`` at the first step to this at ``total_steps`` (SB3's
+            ``LinearSchedule``; the PPO paper anneals its rate so). One run then does what a second,
+            slower phase started from the first's checkpoint did.
         target_kl: PPO stops a round of updates early once the approximate KL divergence from the
             rollout's policy exceeds 1.5 x this (None: no limit, SB3's default). A residual on a
             working controller needs it: without one its updates ran at KL 0.03-0.07 and undid
@@ -93,6 +97,7 @@ class TrainConfig:
     eval_episodes: int = 10
     checkpoint_freq: int = 50_000
     learning_rate: float = 3e-4
+    learning_rate_final: float | None = None
     target_kl: float | None = None
     posture_target: str = "estimate"
     pregrasp_start: float = 0.0
@@ -154,6 +159,9 @@ class TrainConfig:
             raise bad("max_wall_s", "must be None or a finite number > 0")
         if not (isinstance(self.learning_rate, (int, float)) and 0 < self.learning_rate < 1):
             raise bad("learning_rate", "must be in (0, 1)")
+        if self.learning_rate_final is not None and not (
+                isinstance(self.learning_rate_final, (int, float)) and 0 < self.learning_rate_final < 1):
+            raise bad("learning_rate_final", "must be None or in (0, 1)")
         if self.target_kl is not None and not (isinstance(self.target_kl, (int, float))
                                                and math.isfinite(self.target_kl) and self.target_kl > 0):
             raise bad("target_kl", "must be None or a finite number > 0")

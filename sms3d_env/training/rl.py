@@ -35,15 +35,18 @@ def _tensorboard_available() -> bool:
 
 def _build_model(cfg: TrainConfig, env: Any) -> Any:
     from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.utils import LinearSchedule
 
+    rate = cfg.learning_rate if cfg.learning_rate_final is None else \
+        LinearSchedule(cfg.learning_rate, cfg.learning_rate_final, end_fraction=1.0)
     policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": float(cfg.log_std_init)}
     if cfg.algo == "ppo":
         n_steps = cfg.n_steps
         batch = min(cfg.batch_size, n_steps * cfg.n_envs)
-        return PPO("MultiInputPolicy", env, learning_rate=cfg.learning_rate, n_steps=n_steps,
+        return PPO("MultiInputPolicy", env, learning_rate=rate, n_steps=n_steps,
                    batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
                    seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
-    return SAC("MultiInputPolicy", env, learning_rate=cfg.learning_rate, buffer_size=cfg.buffer_size,
+    return SAC("MultiInputPolicy", env, learning_rate=rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
                policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
 

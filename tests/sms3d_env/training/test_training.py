@@ -181,13 +181,31 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
 
 
 @pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
-                                  ["--init-model", "runs/x/model.zip"]], ids=lambda f: f[0])
+                                  ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"]],
+                         ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="cmd"))
     a = parser.parse_args(["train-policy", "--recipe", "bc", *flag])
     assert a.func(a) == 2
     assert flag[0] in capsys.readouterr().out
+
+
+def test_the_learning_rate_falls_linearly_to_its_final_value(tmp_path):
+    """``learning_rate_final``: each round of updates uses the rate of its progress through
+    ``total_steps`` (as the logger records it), from ``learning_rate`` towards the final rate."""
+    cfg = TrainConfig(algo="ppo", total_steps=512, n_steps=128, batch_size=64, learning_rate=1e-3,
+                      learning_rate_final=1e-4, out=str(tmp_path), **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
+    train_policy(cfg)
+    with open(tmp_path / "progress.csv") as f:
+        rows = [r for r in csv.DictReader(f) if r.get("train/learning_rate")]
+    steps = np.array([float(r["time/total_timesteps"]) for r in rows])
+    rates = np.array([float(r["train/learning_rate"]) for r in rows])
+    # A round follows each 128-step rollout at the rate of the progress made; SB3 logs a round's
+    # rate with the next rollout's row (the last round, at the final rate, goes unlogged).
+    assert len(rates) == 3 and rates == pytest.approx(1e-3 + (1e-4 - 1e-3) * (steps - 128) / 512)
+    with pytest.raises(ValueError, match="learning_rate_final"):
+        TrainConfig(learning_rate_final=0.0)
 
 
 def test_eval_rejects_bad_arguments(tmp_path):
