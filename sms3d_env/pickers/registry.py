@@ -65,5 +65,5 @@ def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     # ran the policy sweep ~2.5x slower).
     torch.set_num_threads(1)
     actor = PolicyActor(spec.path or SHIPPED_POLICY)
-    env = make_env(actor.env_id, actor.residual_scale, **{**env_kwargs, **actor.env_options})
+    env = actor.make_env(**env_kwargs)
     return env, actor

@@ -85,6 +85,7 @@ class PolicyActor:
         self.env_id = self.saved.get("env_id", "SMS3DPick-v0")
         self.env_options = dict(self.saved.get("env_options", {}))
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
+        self.residual_until_held = bool(self.saved.get("residual_until_held", False))
         self.model = load_model(path, algo)
         self.obs_stats = None
         stats = observation_stats_path(path)
@@ -93,6 +94,14 @@ class PolicyActor:
 
             with open(stats, "rb") as f:
                 self.obs_stats = pickle.load(f)  # SB3 VecNormalize, saved by train_policy
+
+    def make_env(self, **kwargs: Any) -> Any:
+        """The env this policy runs in: its env id and options, inside the residual wrapper it
+        was trained in (if any), with ``kwargs`` (bed size, pose source, ...) for the rest."""
+        from sms3d_env.training.envs import make_env
+
+        return make_env(self.env_id, self.residual_scale, self.residual_until_held,
+                        **{**kwargs, **self.env_options})
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         if self.obs_stats is not None:

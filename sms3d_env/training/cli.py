@@ -31,6 +31,7 @@ def _cmd_train(args: Any) -> int:
         cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v0" if residual else args.env_id,
                           normalize=args.normalize or residual, scene_pool=args.scene_pool,
                           residual_scale=args.residual_scale if residual else 0.0,
+                          residual_until_held=args.residual_until_held,
                           pose_error_range_deg=args.pose_error_range,
                           log_std_init=args.log_std_init if args.log_std_init is not None
                           else (-1.6 if residual else 0.0),
@@ -58,17 +59,16 @@ def _cmd_train(args: Any) -> int:
 def _cmd_train_bc(args: Any) -> int:
     from sms3d_env.training.imitation import BCConfig, train_bc
 
-    if args.pregrasp_start or args.pregrasp_anneal:
-        print("error: --pregrasp-start and --pregrasp-anneal apply to the rl and residual recipes "
-              "(the bc recipe's demonstrations start at home)")
-        return 2
-    if args.learning_rate_final is not None:
-        print("error: --learning-rate-final applies to the rl and residual recipes (the bc recipe's "
-              "cloning uses a constant rate)")
-        return 2
-    if args.init_model:
-        print("error: --init-model applies to the rl and residual recipes (the bc recipe clones from scratch)")
-        return 2
+    # Options of the rl and residual recipes that behaviour cloning has no use for, and why.
+    rl_only = {"--pregrasp-start": (args.pregrasp_start, "its demonstrations start at home"),
+               "--pregrasp-anneal": (args.pregrasp_anneal, "its demonstrations start at home"),
+               "--learning-rate-final": (args.learning_rate_final is not None, "its cloning uses a constant rate"),
+               "--init-model": (args.init_model, "it clones from scratch"),
+               "--residual-until-held": (args.residual_until_held, "it trains no residual")}
+    for flag, (given, why) in rl_only.items():
+        if given:
+            print(f"error: {flag} applies to the rl and residual recipes (the bc recipe: {why})")
+            return 2
     try:
         cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
                        pose_error_deg=args.pose_error_deg, pose_error_range_deg=args.pose_error_range,
@@ -124,6 +124,9 @@ def register(subparsers: Any) -> None:
                    help="train under a pose error drawn per episode in [LOW, HIGH] degrees")
     p.add_argument("--residual-scale", type=float, default=0.5,
                    help="--recipe residual: the residual's largest share of each command")
+    p.add_argument("--residual-until-held", action="store_true",
+                   help="--recipe residual: correct only the approach and touch-down; once the seal holds "
+                        "the scripted picker's twist and lift run alone")
     p.add_argument("--log-std-init", type=float, default=None,
                    help="initial log standard deviation of the policy (default 0; -1.6 for --recipe residual)")
     p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)

@@ -38,6 +38,8 @@ class TrainConfig:
             ``scene_pool``; resets then cost physics, not placement and compilation).
         residual_scale: > 0 trains a residual on top of the scripted picker
             (:class:`sms3d_env.training.residual.ResidualPicker` with this scale); 0: the policy acts alone.
+        residual_until_held: the residual corrects only until the seal (or grip) holds; the
+            scripted picker's twist and lift then run alone. Needs ``residual_scale`` > 0.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
             uniformly in that range (``pose_source`` must then be ``"noisy"`` and
             ``pose_error_deg`` 0).
@@ -81,6 +83,7 @@ class TrainConfig:
     normalize: bool = False
     scene_pool: int = 0
     residual_scale: float = 0.0
+    residual_until_held: bool = False
     pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
     max_wall_s: float | None = None
@@ -133,6 +136,10 @@ class TrainConfig:
         if not (isinstance(self.residual_scale, (int, float)) and math.isfinite(self.residual_scale)
                 and 0 <= self.residual_scale <= 2):
             raise bad("residual_scale", "must be a number in [0, 2]")
+        if not isinstance(self.residual_until_held, bool):
+            raise bad("residual_until_held", "must be a bool")
+        if self.residual_until_held and not self.residual_scale:
+            raise bad("residual_until_held", "applies to a residual (residual_scale > 0)")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:
@@ -204,7 +211,8 @@ class TrainConfig:
         if self.pregrasp_start:
             kw["pregrasp_start"] = float(self.pregrasp_start)
         kw.update(env_options(self.posture_target))
-        return {"env_id": self.env_id, "residual_scale": self.residual_scale, **kw}
+        return {"env_id": self.env_id, "residual_scale": self.residual_scale,
+                "residual_until_held": self.residual_until_held, **kw}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:

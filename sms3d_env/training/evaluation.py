@@ -13,7 +13,6 @@ import numpy as np
 
 from sms3d_env.training.actor import SHIPPED_POLICY, PolicyActor
 from sms3d_env.training.config import env_kwargs
-from sms3d_env.training.envs import make_env
 
 
 def evaluate_policy_success(model_path: str | Path | None = None, episodes: int = 30,
@@ -53,12 +52,11 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
                     max_episode_steps or actor.saved.get("max_episode_steps", 250))
     if actor.env_id != "SMS3DPick-v0":
         kw.pop("reward_type")
-    kw.update(actor.env_options)
     import torch
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # per-step inference of a small MLP: more threads only add overhead
-    env = make_env(actor.env_id, actor.residual_scale, **kw)
+    env = actor.make_env(**kw)
     causes: Counter[str] = Counter()
     successes = reachable = reach_succ = detached = held = 0
     returns, lengths, per_episode = [], [], []

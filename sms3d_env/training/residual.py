@@ -7,6 +7,9 @@ it on the same observation, the policy's action in [-1, 1]^7 is scaled by ``scal
 the picker's action, and the observation gains the picker's action (``base_action``) so that the
 policy knows what it corrects. An all-zero residual is the scripted picker exactly, so training
 starts from its success rate; PPO's action head starts near zero (orthogonal init, gain 0.01).
+With ``until_held`` the residual corrects only the approach and touch-down: once the vacuum
+sensor reports a seal (a hand: two fingers holding), the scripted picker's twist and lift run
+alone (session 9: a residual over the whole episode lost grips the scripted picker kept).
 """
 
 from __future__ import annotations
@@ -24,23 +27,29 @@ class ResidualPicker(gym.Wrapper):
     Args:
         env: a pick env (``SMS3DPick-v0`` or ``SMS3DPickTrain-v0``, any options).
         scale: the residual's largest share of each normalised command (0 < scale <= 2).
+        until_held: drop the residual while ``obs["suction"][1]`` (sealed / holding) is set.
     """
 
-    def __init__(self, env: gym.Env, scale: float = 0.5) -> None:
+    def __init__(self, env: gym.Env, scale: float = 0.5, until_held: bool = False) -> None:
         super().__init__(env)
         if not (isinstance(scale, (int, float)) and np.isfinite(scale) and 0 < scale <= 2):
             raise ValueError(f"residual scale must be in (0, 2], got {scale!r}")
         from sms3d_env.pickers.scripted import ScriptedPicker
 
+        if not isinstance(until_held, bool):
+            raise ValueError(f"until_held must be a bool, got {until_held!r}")
         self.scale = float(scale)
+        self.until_held = until_held
         self.picker = ScriptedPicker.for_env(env)
         self.observation_space = spaces.Dict({
             **env.observation_space.spaces,
             "base_action": spaces.Box(-1.0, 1.0, (7,), np.float32)})
         self._base = np.zeros(7, np.float32)
+        self._held = False
 
     def _with_base(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         self._base = self.picker(obs)
+        self._held = bool(obs["suction"][1] > 0.5)
         return {**obs, "base_action": self._base}
 
     def reset(self, **kwargs: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -49,7 +58,10 @@ class ResidualPicker(gym.Wrapper):
         return self._with_base(obs), info
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        a = np.asarray(action, np.float32)
-        command = np.clip(self._base + self.scale * np.clip(a, -1.0, 1.0), -1.0, 1.0)
+        if self.until_held and self._held:
+            command = self._base
+        else:
+            a = np.asarray(action, np.float32)
+            command = np.clip(self._base + self.scale * np.clip(a, -1.0, 1.0), -1.0, 1.0)
         obs, reward, terminated, truncated, info = self.env.step(command)
         return self._with_base(obs), reward, terminated, truncated, info

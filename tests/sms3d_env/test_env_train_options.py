@@ -270,6 +270,32 @@ def test_a_zero_residual_is_the_scripted_picker_exactly():
         ResidualPicker(plain, scale=0.0)
 
 
+def test_a_residual_until_held_leaves_the_twist_and_lift_to_the_scripted_picker():
+    """After the seal, ``until_held`` drops the residual: a full-scale push on every command
+    from then on still picks as the scripted picker does; without it the push changes the episode."""
+    from sms3d_env.pickers import run_episode
+    from sms3d_env.training.residual import ResidualPicker
+
+    plain = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
+    assert expected["success"]
+    outcomes = {}
+    for until_held in (True, False):
+        env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), scale=1.0, until_held=until_held)
+        obs, _ = env.reset(seed=2)
+        done, steps = False, 0
+        while not done:
+            push = np.ones(7, np.float32) if obs["suction"][1] > 0.5 else np.zeros(7, np.float32)
+            obs, _, terminated, truncated, info = env.step(push)
+            steps += 1
+            done = terminated or truncated
+        outcomes[until_held] = (info["is_success"], steps)
+    assert outcomes[True] == (expected["success"], expected["steps"])
+    assert outcomes[False] != outcomes[True]
+    with pytest.raises(ValueError, match="until_held"):
+        ResidualPicker(plain, until_held=1)
+
+
 def test_uniform_noisy_pose_errs_within_its_range():
     from sms3d_env.pose_sources import UniformNoisyPose
 

@@ -131,6 +131,24 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
     assert "posture_target" not in TrainConfig().env_kwargs()
 
 
+def test_a_residual_until_held_is_trained_and_rebuilt_so(tmp_path):
+    """``residual_until_held`` reaches the training env's wrapper and, through ``config.json``,
+    the env every later evaluation builds for the policy."""
+    from sms3d_env.training.actor import PolicyActor
+
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_until_held=True,
+                      normalize=True, total_steps=128, n_steps=128, batch_size=64, out=str(tmp_path),
+                      **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
+    train_policy(cfg)
+    env = PolicyActor(tmp_path / "model.zip").make_env()
+    try:
+        assert env.until_held and env.scale == 0.5
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="residual_until_held"):
+        TrainConfig(residual_until_held=True)
+
+
 def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
     """The training envs start a share of their episodes on the way to a pre-grasp pose; the
     periodic evaluation and every later evaluation of the saved policy start at home."""
@@ -181,7 +199,8 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
 
 
 @pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
-                                  ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"]],
+                                  ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
+                                  ["--residual-until-held"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
