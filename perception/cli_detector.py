@@ -79,15 +79,19 @@ def _set_threads(threads: int | None) -> None:
 def _pipeline(args: argparse.Namespace):
     """The pipeline ``--detector``/``--weights`` name, after printing the ``masks:`` line."""
     from perception.detection.load import describe_detector, load_detector
+    from perception.errors import PerceptionConfigError
     from perception.pipeline import PosePipeline
     from perception.pose.estimator import PoseEstimator
 
     estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
     oracle = args.detector == "oracle"
+    for flag in ("--soil-margin-mm", "--edge-tolerance-mm"):
+        if oracle and getattr(args, flag[2:].replace("-", "_")) > 0:
+            raise PerceptionConfigError(flag, "trims a detector's masks; MuJoCo's (--detector oracle) are exact")
     overrides = {} if args.score_threshold is None else {"score_threshold": args.score_threshold}
     detector = load_detector(args.detector, **overrides)
-    soil = None if oracle or args.soil_margin_mm <= 0 else args.soil_margin_mm / 1000.0
-    edge = None if oracle or args.edge_tolerance_mm <= 0 else args.edge_tolerance_mm / 1000.0
+    soil = None if args.soil_margin_mm <= 0 else args.soil_margin_mm / 1000.0
+    edge = None if args.edge_tolerance_mm <= 0 else args.edge_tolerance_mm / 1000.0
     print(f"masks: {describe_detector(args.detector)}")
     return PosePipeline(estimator, detector, soil_margin_m=soil, edge_tolerance_m=edge), oracle
 

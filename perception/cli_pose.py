@@ -112,9 +112,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     cache = Path(args.cache) if args.cache else None
-    if args.add_synthetic and not args.scenes:
-        print("error: --add-synthetic needs --scenes", file=sys.stderr)
-        return 2
+    for flag, given in (("--add-synthetic", args.add_synthetic), ("--edge-tolerance-mm", args.edge_tolerance_mm)):
+        if given and not args.scenes:
+            print(f"error: {flag} needs --scenes", file=sys.stderr)
+            return 2
     if args.scenes:
         try:
             train_s = _scene_samples(args, "train", args.seed)

@@ -37,6 +37,9 @@ CASES = [
     (["eval-pipeline", "--data", "{out}", "--edge-tolerance-mm", "-1"], "--edge-tolerance-mm"),
     (["eval-pipeline", "--data", "{out}", "--edge-tolerance-mm", "nan"], "--edge-tolerance-mm"),
     (["train-pose", "--out", "{out}", "--scenes", "{out}", "--edge-tolerance-mm", "8"], "--edge-tolerance-mm"),
+    (["train-pose", "--out", "{out}", "--edge-tolerance-mm", "8"], "--edge-tolerance-mm"),
+    (["eval-pipeline", "--data", "{out}", "--detector", "oracle", "--edge-tolerance-mm", "8"], "--edge-tolerance-mm"),
+    (["show-estimates", "--data", "{out}", "--detector", "oracle", "--soil-margin-mm", "4"], "--soil-margin-mm"),
 ]
 
 

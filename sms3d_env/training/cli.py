@@ -27,6 +27,9 @@ def _cmd_train(args: Any) -> int:
     noisy = args.pose_error_deg > 0 or args.pose_error_range is not None
     pose_source = args.pose_source or ("noisy" if noisy else "oracle")
     residual = args.recipe == "residual"
+    if args.residual_until_held and not residual:
+        print("error: --residual-until-held applies to --recipe residual")
+        return 2
     try:
         cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v0" if residual else args.env_id,
                           normalize=args.normalize or residual, scene_pool=args.scene_pool,

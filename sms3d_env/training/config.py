@@ -52,8 +52,10 @@ class TrainConfig:
         gamma, net_arch: algorithm hyper-parameters.
         learning_rate_final: ``None``: a constant ``learning_rate``; else the rate falls linearly
             from ``learning_rate`` at the first step to this at ``total_steps`` (SB3's
-            ``LinearSchedule``; the PPO paper anneals its rate so). One run then does what a second,
-            slower phase started from the first's checkpoint did.
+            ``LinearSchedule``; the PPO paper anneals its rate so), so that one run lowers the rate
+            that a second phase, started from the first's checkpoint, lowered by hand. The schedule runs over
+            ``total_steps``: with ``max_wall_s``, set ``total_steps`` to what fits in it (PPO on 2
+            envs here: 480–640 steps/s), or the rate stops short of its final value.
         target_kl: PPO stops a round of updates early once the approximate KL divergence from the
             rollout's policy exceeds 1.5 x this (None: no limit, SB3's default). A residual on a
             working controller needs it: without one its updates ran at KL 0.03-0.07 and undid
@@ -70,7 +72,10 @@ class TrainConfig:
         init_model: a saved model of this algorithm and architecture (``model.zip``, a checkpoint,
             ``best/best_model.zip``) whose weights, and with ``normalize`` observation
             statistics, the run starts from instead of a fresh policy (e.g. a second phase at a
-            lower learning rate); ``None``: from scratch.
+            lower learning rate); ``None``: from scratch. PPO only; ``out`` must be another
+            folder. The run's own counters start afresh: its step count, learning-rate schedule
+            and ``pregrasp_anneal``'s success window (the share is back at ``pregrasp_start``
+            until 10 home-start episodes have ended).
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
             standard deviation of 1 on every normalised command; a residual starts quieter).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
@@ -185,6 +190,11 @@ class TrainConfig:
             raise bad("pregrasp_anneal", "lowers pregrasp_start, which is 0 (set a share > 0)")
         if self.init_model is not None and not (isinstance(self.init_model, str) and self.init_model):
             raise bad("init_model", "must be None or the path of a saved model")
+        if self.init_model is not None and self.algo != "ppo":
+            # SB3's set_parameters restores SAC's networks but neither its entropy coefficient nor
+            # its replay buffer: the run would not continue the saved one.
+            raise bad("init_model", "continues PPO runs only (SAC's entropy coefficient and replay "
+                                    "buffer are not restored by loading its weights)")
         if not (0 < self.gamma <= 1):
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):

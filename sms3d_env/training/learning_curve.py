@@ -64,6 +64,8 @@ def _started_from(run: Path) -> tuple[Path, int] | None:
     steps = checkpoint_steps(path)
     if steps is None or path.parent.name != "checkpoints" or not (path.parent.parent / "progress.csv").is_file():
         return None
+    if path.parent.parent.resolve() == run.resolve():  # a run cannot continue itself
+        return None
     return path.parent.parent, steps
 
 

@@ -7,9 +7,9 @@ it on the same observation, the policy's action in [-1, 1]^7 is scaled by ``scal
 the picker's action, and the observation gains the picker's action (``base_action``) so that the
 policy knows what it corrects. An all-zero residual is the scripted picker exactly, so training
 starts from its success rate; PPO's action head starts near zero (orthogonal init, gain 0.01).
-With ``until_held`` the residual corrects only the approach and touch-down: once the vacuum
+With ``until_held`` the residual corrects only the approach and touch-down: while the vacuum
 sensor reports a seal (a hand: two fingers holding), the scripted picker's twist and lift run
-alone (session 9: a residual over the whole episode lost grips the scripted picker kept).
+alone, and the residual is back if the seal is lost (session 9: a residual over the whole episode lost grips the scripted picker kept).
 """
 
 from __future__ import annotations

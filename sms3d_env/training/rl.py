@@ -55,39 +55,56 @@ class InitModelError(ValueError):
     """``TrainConfig.init_model`` is missing, lacks its observation statistics or does not fit."""
 
 
+def _check_init_model(cfg: TrainConfig) -> None:
+    """Before anything is written: ``cfg.init_model`` exists, is no file of ``cfg.out`` itself
+    (that run's files would be overwritten), and brings what the run needs
+    (``InitModelError`` naming the file)."""
+    path = Path(cfg.init_model)
+    if not path.is_file():
+        raise InitModelError(f"TrainConfig.init_model: no saved model at {path}")
+    out = Path(cfg.out).resolve()
+    if out in (path.resolve().parent, path.resolve().parent.parent):
+        raise InitModelError(f"TrainConfig.init_model: {path} belongs to the output folder {cfg.out}; "
+                             "a continued run needs an out of its own")
+    stats = observation_stats_path(path)
+    if cfg.normalize and stats is None:
+        raise InitModelError(f"TrainConfig.init_model: no observation statistics saved with {path} "
+                             f"(normalize=True needs {VECNORM_FILE} or the checkpoint's own)")
+    if not cfg.normalize and stats is not None:
+        raise InitModelError(f"TrainConfig.init_model: {path} was trained on normalised observations "
+                             f"({stats.name}); set normalize=True (--normalize) to start from it")
+
+
 def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:
     """``cfg.init_model``: its weights into ``model`` and, with ``normalize``, its observation
     statistics into ``env`` (``InitModelError`` naming the file)."""
     import pickle
 
+    _check_init_model(cfg)
     path = Path(cfg.init_model)
-    if not path.is_file():
-        raise InitModelError(f"TrainConfig.init_model: no saved model at {path}")
     try:
         model.set_parameters(str(path), exact_match=True, device=cfg.device)
     except (ValueError, RuntimeError, KeyError) as exc:
         raise InitModelError(f"TrainConfig.init_model: {path} does not fit a {cfg.algo} policy with "
                          f"net_arch {list(cfg.net_arch)} on {cfg.env_id} ({exc})") from None
     if cfg.normalize:
-        stats = observation_stats_path(path)
-        if stats is None:
-            raise InitModelError(f"TrainConfig.init_model: no observation statistics saved with {path} "
-                                    f"(normalize=True needs {VECNORM_FILE} or the checkpoint's own)")
-        with open(stats, "rb") as f:
+        with open(observation_stats_path(path), "rb") as f:
             env.obs_rms = pickle.load(f).obs_rms
 
 
-def _save_beside_best(env: Any, out: Path) -> Any:
-    """A callback for ``EvalCallback``'s new best: the observation statistics of that moment and
-    the run's ``config.json`` beside ``best/best_model.zip``, so that ``eval-policy`` and the sweep
-    load the best model as they load the final one (the statistics keep changing after it)."""
+def _save_beside_best(env: Any, out: Path, normalize: bool) -> Any:
+    """A callback for ``EvalCallback``'s new best: the run's ``config.json`` and, with
+    ``normalize``, the observation statistics of that moment beside ``best/best_model.zip``, so
+    that ``eval-policy`` and the sweep load the best model as they load the final one (the
+    statistics keep changing after it)."""
     from stable_baselines3.common.callbacks import BaseCallback
 
     class _SaveBesideBest(BaseCallback):
         def _on_step(self) -> bool:
             best = out / "best"
             best.mkdir(parents=True, exist_ok=True)
-            env.save(str(best / VECNORM_FILE))
+            if normalize:
+                env.save(str(best / VECNORM_FILE))
             (best / "config.json").write_text((out / "config.json").read_text())
             return True
 
@@ -132,6 +149,8 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
     from stable_baselines3.common.logger import configure
 
+    if cfg.init_model is not None:
+        _check_init_model(cfg)
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(
@@ -160,7 +179,7 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
             callbacks.append(EvalCallback(
                 eval_env, n_eval_episodes=cfg.eval_episodes, eval_freq=max(cfg.eval_freq // cfg.n_envs, 1),
                 log_path=str(out / "eval"), best_model_save_path=str(out / "best"),
-                callback_on_new_best=_save_beside_best(env, out) if cfg.normalize else None,
+                callback_on_new_best=_save_beside_best(env, out, cfg.normalize),
                 deterministic=True, verbose=cfg.verbose, warn=False))
         if cfg.checkpoint_freq > 0:
             callbacks.append(CheckpointCallback(max(cfg.checkpoint_freq // cfg.n_envs, 1),

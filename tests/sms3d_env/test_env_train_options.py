@@ -272,7 +272,8 @@ def test_a_zero_residual_is_the_scripted_picker_exactly():
 
 def test_a_residual_until_held_leaves_the_twist_and_lift_to_the_scripted_picker():
     """After the seal, ``until_held`` drops the residual: a full-scale push on every command
-    from then on still picks as the scripted picker does; without it the push changes the episode."""
+    from then on still picks as the scripted picker does; without it the push changes the episode,
+    and so does the same push before the seal with it."""
     from sms3d_env.pickers import run_episode
     from sms3d_env.training.residual import ResidualPicker
 
@@ -280,18 +281,20 @@ def test_a_residual_until_held_leaves_the_twist_and_lift_to_the_scripted_picker(
     expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
     assert expected["success"]
     outcomes = {}
-    for until_held in (True, False):
+    for until_held, push_when_held in ((True, True), (False, True), (True, False)):
         env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), scale=1.0, until_held=until_held)
         obs, _ = env.reset(seed=2)
         done, steps = False, 0
         while not done:
-            push = np.ones(7, np.float32) if obs["suction"][1] > 0.5 else np.zeros(7, np.float32)
+            held = obs["suction"][1] > 0.5
+            push = np.full(7, float(held == push_when_held), np.float32)
             obs, _, terminated, truncated, info = env.step(push)
             steps += 1
             done = terminated or truncated
-        outcomes[until_held] = (info["is_success"], steps)
-    assert outcomes[True] == (expected["success"], expected["steps"])
-    assert outcomes[False] != outcomes[True]
+        outcomes[until_held, push_when_held] = (info["is_success"], steps)
+    assert outcomes[True, True] == (expected["success"], expected["steps"])
+    assert outcomes[False, True] != outcomes[True, True]
+    assert outcomes[True, False] != outcomes[True, True]
     with pytest.raises(ValueError, match="until_held"):
         ResidualPicker(plain, until_held=1)
 

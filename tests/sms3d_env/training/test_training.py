@@ -190,12 +190,14 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
     run's config.json lie beside it (they were missing, and the statistics drift after the best)."""
     from sms3d_env.training.actor import PolicyActor
 
-    cfg = TrainConfig(algo="ppo", total_steps=256, n_steps=128, batch_size=64, normalize=True,
-                      out=str(tmp_path), **{**FAST, "checkpoint_freq": 0})
-    train_policy(cfg)
-    actor = PolicyActor(tmp_path / "best" / "best_model.zip")
-    assert actor.obs_stats is not None and actor.env_id == cfg.env_id
-    assert (tmp_path / "best" / "config.json").read_text() == (tmp_path / "config.json").read_text()
+    for normalize in (True, False):
+        out = tmp_path / str(normalize)
+        cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", total_steps=256, n_steps=128, batch_size=64,
+                          normalize=normalize, out=str(out), **{**FAST, "checkpoint_freq": 0})
+        train_policy(cfg)
+        actor = PolicyActor(out / "best" / "best_model.zip")
+        assert (actor.obs_stats is not None) == normalize and actor.env_id == cfg.env_id
+        assert (out / "best" / "config.json").read_text() == (out / "config.json").read_text()
 
 
 @pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
@@ -248,6 +250,8 @@ def test_cli_registers_subcommands():
     assert (b.episodes, b.pose_error_deg) == (30, 30.0) and callable(b.func)
     bad = parser.parse_args(["train-policy", "--n-envs", "0"])
     assert bad.func(bad) == 2
+    not_residual = parser.parse_args(["train-policy", "--residual-until-held"])
+    assert not_residual.func(not_residual) == 2
 
 
 def test_module_main_eval_policy(ppo_run, tmp_path, capsys):
@@ -300,4 +304,15 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
             _start_from(_build_model(wider, env), env, wider)
     finally:
         env.close()
+    # Refused before anything is written: continuing into the run's own folder, and dropping the
+    # normalisation the weights were trained with.
+    written = (first / "config.json").read_text()
+    with pytest.raises(InitModelError, match="output folder"):
+        train_policy(TrainConfig(**{**again.__dict__, "out": str(first), "total_steps": 1_000_000}))
+    assert (first / "config.json").read_text() == written
+    with pytest.raises(InitModelError, match="normalize=True"):
+        train_policy(TrainConfig(**{**again.__dict__, "normalize": False}))
+    assert not (tmp_path / "second").exists()
+    with pytest.raises(ValueError, match="init_model"):
+        TrainConfig(algo="sac", init_model=str(checkpoint))
 
