@@ -36,7 +36,8 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
                    suction_mode: Any, horizon: Any, scene_pool: Any, pool_seed: Any, scenes: Any,
                    pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
                    image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
-                   scene_config: Any, posture_target: Any = "estimate", pregrasp_start: Any = 0.0) -> None:
+                   scene_config: Any, posture_target: Any = "estimate", pregrasp_start: Any = 0.0,
+                   reach_lateral_weight: Any = 1.0) -> None:
     """Every check of the env's keyword arguments that needs no model (``tool`` is the resolved
     tool, ``robot.tool`` or the ``tool`` argument)."""
     if render_mode is not None and render_mode not in RENDER_MODES:
@@ -54,6 +55,10 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
     if posture_target not in POSTURE_TARGETS:
         raise ValueError(f"posture_target must be one of {POSTURE_TARGETS}, got {posture_target!r}")
     check_pregrasp_start(pregrasp_start)
+    _finite("reach_lateral_weight", reach_lateral_weight, 1.0, math.inf, "a finite number >= 1")
+    if reach_lateral_weight != 1 and reward_type != "staged":
+        raise ValueError(f"reach_lateral_weight shapes the staged reward only; with reward_type="
+                         f"{reward_type!r} it would be ignored (got {reach_lateral_weight!r})")
     _int_at_least("horizon", horizon, 1)
     _int_at_least("scene_pool", scene_pool)
     _int_at_least("pool_seed", pool_seed)

@@ -154,6 +154,9 @@ class SMS3DPickEnv(gym.Env):
             stream. ``info["start"]`` says which start an episode had (``"home"`` or
             ``"pregrasp"``); ``set_pregrasp_start(p)`` changes the share between episodes (a
             training schedule reaches it through ``VecEnv.env_method``).
+        reach_lateral_weight: the staged reward's approach funnel: the weight (>= 1) of the
+            tool's offset across the estimated stem axis in the reach term's distance (1, the
+            default: the plain distance to the estimated cap top). Refused with another reward.
 
     ``SMS3DPickTrain-v0`` sets the training options: ``suction_mode="latched"``,
     ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
@@ -192,6 +195,7 @@ class SMS3DPickEnv(gym.Env):
         pool_seed: int = 0,
         posture_target: str = "estimate",
         pregrasp_start: float = 0.0,
+        reach_lateral_weight: float = 1.0,
     ) -> None:
         self.robot_cfg = robot or RobotConfig()
         check_env_args(render_mode=render_mode, reward_type=reward_type, control_dt=control_dt,
@@ -201,7 +205,8 @@ class SMS3DPickEnv(gym.Env):
                        position_noise=position_noise, target_rule=target_rule, image_size=image_size,
                        render_size=render_size, max_tilt_deg=max_tilt_deg, free_radius=free_radius,
                        scene_config=scene_config, posture_target=posture_target,
-                       pregrasp_start=pregrasp_start)
+                       pregrasp_start=pregrasp_start,
+                       reach_lateral_weight=reach_lateral_weight)
         if tool is not None:
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
@@ -209,7 +214,7 @@ class SMS3DPickEnv(gym.Env):
         self.scene_source = SceneSource(scene_config, scenes, scene_pool, pool_seed)
         self.pose_source = make_pose_source(pose_source, pose_error_deg, position_noise)
         self.target_rule, self.target_index = target_rule, target_index
-        self.reward_type = reward_type
+        self.reward_type, self.reach_lateral_weight = reward_type, float(reach_lateral_weight)
         self.params = physics or PickPhysicsParams(cup_radius=self.robot_cfg.cup_radius)
         self.ctrl_cfg = controller or ControllerConfig()
         self.control_dt, self.substeps = float(control_dt), substeps
@@ -389,7 +394,7 @@ class SMS3DPickEnv(gym.Env):
             gripped_target=ep.grip == ep.target, target_detached=ep.target_detached,
             lift=self.picking.lift(), lift_goal=self.params.lift_height, success=success,
             bruised=bool(ep.bruised), root_utilisation=ep.root_util,
-            steps_left=self.horizon - self.steps)
+            steps_left=self.horizon - self.steps, lateral_weight=self.reach_lateral_weight)
         if self.reward_type == "staged":
             terms = reward_terms(s)
             return sum(terms.values()), terms

@@ -39,6 +39,7 @@ class RewardState:
     bruised: bool
     root_utilisation: float = 0.0  # target root load / its detachment capacity (>= 1 detaches)
     steps_left: int = 0  # control steps until the time limit (the staged success bonus)
+    lateral_weight: float = 1.0  # staged reach: weight of the offset across the estimated axis
 
 
 def compute_reward(s: RewardState, reward_type: str) -> float:
@@ -79,7 +80,9 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     | success | detached, held, lifted | 1 + ``steps_left`` |
 
     reach = 1 - mean(tanh(5/m x d), tanh(30/m x d)), d the distance from the tool to the
-    *estimated* cap top; align = 1 - tanh(3/rad x angle between the cup axis and the estimated
+    *estimated* cap top with its component across the estimated stem axis weighted by
+    ``lateral_weight`` (1: the plain distance; > 1 a funnel that pays more for arriving along the
+    axis than from the side, where the cup's rim knocks the cap off its root); align = 1 - tanh(3/rad x angle between the cup axis and the estimated
     stem axis, reversed). Per step the
     reward is at most 1, reached only at success; the success step also pays ``steps_left`` (the
     return of holding that maximum until the time limit), so finishing early is never worth less
@@ -96,9 +99,21 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     if s.gripped_target:
         load = min(max(s.root_utilisation, 0.0), 1.0)
         return {"stage": STAGE_FLOORS["sealed"], "progress": ROOT_WEIGHT * load, "success_bonus": 0.0}
-    d = math.dist(s.tool_pos, s.est_cap_top)
+    d = _reach_distance(s)
     reach = 1.0 - sum(math.tanh(k * d) for k in REACH_SCALES) / len(REACH_SCALES)
     cos = float(np.clip(-(s.tool_axis @ s.est_axis) / np.linalg.norm(s.est_axis), -1.0, 1.0))
     align = 1.0 - math.tanh(ALIGN_SCALE * math.acos(cos))
     return {"stage": STAGE_FLOORS["approach"], "progress": APPROACH_WEIGHT * reach * align,
             "success_bonus": 0.0}
+
+
+def _reach_distance(s: RewardState) -> float:
+    """The staged reach term's distance (m): tool to estimated cap top, the part across the
+    estimated stem axis scaled by ``s.lateral_weight``."""
+    if s.lateral_weight == 1.0:  # bit-identical to the reward before the weight existed
+        return math.dist(s.tool_pos, s.est_cap_top)
+    offset = np.asarray(s.tool_pos, float) - s.est_cap_top
+    axis = s.est_axis / np.linalg.norm(s.est_axis)
+    along = float(offset @ axis)
+    across = float(np.linalg.norm(offset - along * axis))
+    return math.hypot(along, s.lateral_weight * across)

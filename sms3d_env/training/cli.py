@@ -46,7 +46,7 @@ def _cmd_train(args: Any) -> int:
                           learning_rate_final=args.learning_rate_final,
                           target_kl=args.target_kl, posture_target=args.posture_target,
                           pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
-                          init_model=args.init_model)
+                          reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -67,6 +67,7 @@ def _cmd_train_bc(args: Any) -> int:
                "--pregrasp-anneal": (args.pregrasp_anneal, "its demonstrations start at home"),
                "--learning-rate-final": (args.learning_rate_final is not None, "its cloning uses a constant rate"),
                "--init-model": (args.init_model, "it clones from scratch"),
+               "--reach-lateral-weight": (args.reach_lateral_weight != 1, "it is trained on actions, not rewards"),
                "--residual-until-held": (args.residual_until_held, "it trains no residual")}
     for flag, (given, why) in rl_only.items():
         if given:
@@ -150,6 +151,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--pregrasp-anneal", action="store_true",
                    help="rl/residual: lower that share as training episodes from home succeed: "
                         "P x (1 - success of the last 100 home starts), set after each rollout")
+    p.add_argument("--reach-lateral-weight", type=float, default=defaults.reach_lateral_weight, metavar="W",
+                   help="rl/residual, staged reward: weight the tool's offset across the estimated stem axis by W "
+                        "in the reach term (an approach funnel; default 1, the plain distance)")
     p.add_argument("--init-model", default=None, metavar="PATH",
                    help="rl/residual: start from this saved model (model.zip, a checkpoint or best/best_model.zip; "
                         "its observation statistics too with --normalize) instead of a fresh policy")

@@ -69,6 +69,9 @@ class TrainConfig:
         pregrasp_anneal: lower that share after each rollout to ``pregrasp_start × (1 − s)``,
             ``s`` the success rate of the last 100 training episodes that started at home
             (:mod:`sms3d_env.training.curriculum`); needs ``pregrasp_start`` > 0.
+        reach_lateral_weight: the staged reward's approach funnel (the env's
+            ``reach_lateral_weight``): the weight of the tool's offset across the estimated stem
+            axis in the reach term (1: the plain distance). Needs the staged reward.
         init_model: a saved model of this algorithm and architecture (``model.zip``, a checkpoint,
             ``best/best_model.zip``) whose weights, and with ``normalize`` observation
             statistics, the run starts from instead of a fresh policy (e.g. a second phase at a
@@ -110,6 +113,7 @@ class TrainConfig:
     posture_target: str = "estimate"
     pregrasp_start: float = 0.0
     pregrasp_anneal: bool = False
+    reach_lateral_weight: float = 1.0
     init_model: str | None = None
     batch_size: int = 256
     n_steps: int = 1024
@@ -188,6 +192,12 @@ class TrainConfig:
             raise bad("pregrasp_anneal", "must be a bool")
         if self.pregrasp_anneal and not self.pregrasp_start:
             raise bad("pregrasp_anneal", "lowers pregrasp_start, which is 0 (set a share > 0)")
+        if not (isinstance(self.reach_lateral_weight, (int, float)) and not isinstance(self.reach_lateral_weight, bool)
+                and math.isfinite(self.reach_lateral_weight) and self.reach_lateral_weight >= 1):
+            raise bad("reach_lateral_weight", "must be a finite number >= 1")
+        if self.reach_lateral_weight != 1 and self.env_id == "SMS3DPick-v0" and self.reward_type != "staged":
+            raise bad("reach_lateral_weight", "shapes the staged reward only (use SMS3DPickTrain-v0 or "
+                                              "reward_type='staged')")
         if self.init_model is not None and not (isinstance(self.init_model, str) and self.init_model):
             raise bad("init_model", "must be None or the path of a saved model")
         if self.init_model is not None and self.algo != "ppo":
@@ -220,6 +230,8 @@ class TrainConfig:
             kw["scene_pool"] = self.scene_pool
         if self.pregrasp_start:
             kw["pregrasp_start"] = float(self.pregrasp_start)
+        if self.reach_lateral_weight != 1:
+            kw["reach_lateral_weight"] = float(self.reach_lateral_weight)
         kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale,
                 "residual_until_held": self.residual_until_held, **kw}

@@ -96,6 +96,25 @@ def test_staged_reward_orders_the_stages():
     assert sum(knocked_off.values()) == far  # detachment alone pays nothing
 
 
+@settings(max_examples=100, deadline=None)
+@given(height=st.floats(0.005, 0.2), weight=st.floats(1.5, 10.0))
+def test_the_reach_funnel_pays_more_above_the_cap_than_beside_it(height, weight):
+    def approach(tool_pos, w):
+        return reward_terms(_reward_state(tool_pos=tool_pos, lateral_weight=w))["progress"]
+
+    top = np.array([0.0, 0.0, -0.05])
+    above, beside = top + [0.0, 0.0, height], top + [height, 0.0, 0.0]
+    assert approach(above, 1.0) == pytest.approx(approach(beside, 1.0))  # the plain distance
+    assert approach(above, weight) == pytest.approx(approach(above, 1.0))  # on the axis: unchanged
+    assert approach(beside, weight) < approach(above, weight)
+
+
+def test_the_reach_funnel_needs_the_staged_reward():
+    with pytest.raises(ValueError, match="reach_lateral_weight shapes the staged reward only"):
+        sms3d_env.SMS3DPickEnv(reach_lateral_weight=3.0)
+    gym.make("SMS3DPickTrain-v0", scene_config=SMALL, reach_lateral_weight=3.0)  # accepted
+
+
 def test_scripted_success_is_reported_with_reward_terms():
     env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
     picker = ScriptedPicker.for_env(env)
@@ -213,6 +232,8 @@ BAD_ARGS = [
     ({"suction_mode": "sticky"}, "suction_mode"),
     ({"tool": "hand", "suction_mode": "latched"}, "suction_mode"),
     ({"horizon": 0}, "horizon"),
+    ({"reward_type": "staged", "reach_lateral_weight": 0.5}, "reach_lateral_weight"),
+    ({"reward_type": "staged", "reach_lateral_weight": float("inf")}, "reach_lateral_weight"),
 ]
 
 

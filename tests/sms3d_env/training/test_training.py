@@ -101,6 +101,8 @@ def test_sac_short_run(tmp_path):
     ({"posture_target": "home"}, "posture_target"),
     ({"pregrasp_start": 1.5}, "pregrasp_start"),
     ({"pregrasp_start": -0.1}, "pregrasp_start"),
+    ({"env_id": "SMS3DPickTrain-v0", "reach_lateral_weight": 0.5}, "reach_lateral_weight"),
+    ({"reach_lateral_weight": 3.0}, "reach_lateral_weight"),  # the dense reward has no reach funnel
 ])
 def test_invalid_config_names_field(kw, field):
     with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
@@ -129,6 +131,12 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
     assert model.target_kl == 0.01 and model.learning_rate == 1e-4
     assert PolicyActor(tmp_path / "model.zip").env_options == {"posture_target": "tool"}
     assert "posture_target" not in TrainConfig().env_kwargs()
+
+
+def test_the_reach_funnel_reaches_the_training_env():
+    kw = TrainConfig(env_id="SMS3DPickTrain-v0", reach_lateral_weight=3.0).env_kwargs()
+    assert kw["reach_lateral_weight"] == 3.0
+    assert "reach_lateral_weight" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
 
 
 def test_a_residual_until_held_is_trained_and_rebuilt_so(tmp_path):
@@ -202,7 +210,7 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
 
 @pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
                                   ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
-                                  ["--residual-until-held"]],
+                                  ["--residual-until-held"], ["--reach-lateral-weight", "3"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
