@@ -112,8 +112,10 @@ def within_depth_of_core(mask: np.ndarray, depth: np.ndarray, tolerance_m: float
     mask eroded by ``core_px``; a border pixel is kept when its valid depth is at most
     ``tolerance_m`` beyond the deepest interior depth within ``core_px + 1`` pixels of it, so a
     cap's own rim (which falls away by millimetres) stays and the soil beyond it goes, however
-    close the soil is to the cap elsewhere (which ``above_soil``'s ring cannot tell). A mask
-    with fewer than ``MIN_POINTS`` interior pixels is returned unchanged.
+    close the soil is to the cap elsewhere (which ``above_soil``'s ring cannot tell). Parts too
+    thin to have an interior beside them (a sliver of a cap between its neighbours) have
+    nothing to be judged by and stay. A mask with fewer than ``MIN_POINTS`` interior pixels is
+    returned unchanged.
     """
     core = cv2.erode(mask.astype(np.uint8), np.ones((2 * core_px + 1,) * 2, np.uint8)).astype(bool)
     valid = np.isfinite(depth) & (depth > 0)
@@ -121,7 +123,7 @@ def within_depth_of_core(mask: np.ndarray, depth: np.ndarray, tolerance_m: float
         return mask
     interior = np.where(core & valid, depth, 0.0).astype(np.float32)
     deepest = cv2.dilate(interior, np.ones((2 * core_px + 3,) * 2, np.uint8))
-    border = mask & ~core & valid & (deepest > 0) & (depth <= deepest + tolerance_m)
+    border = mask & ~core & ((deepest == 0) | (depth <= deepest + tolerance_m))
     return core | border
 
 
@@ -141,9 +143,9 @@ class PosePipeline:
     0.973 -> 0.944). ``edge_tolerance_m`` drops border pixels deeper than the mask's interior
     beside them by more than that (``within_depth_of_core``; ``None``, the default, keeps masks
     whole). Measured on the 50 clean held-out beds at 10 mm (benchmarks/RESULTS.md): it helps
-    fully visible caps (shipped network 6.9° -> 4.9° mean stem-axis error; the stage-5 network,
-    trained on exact masks, 30° -> 8.9° overall) and hurts occluded ones (21.5° -> 27.4° below
-    half visible), 9.0° -> 8.9° in all; under the camera model 15.7° -> 18.0°, so it is off by
+    fully visible caps (shipped network 6.9° -> 5.0° mean stem-axis error; the stage-5 network,
+    trained on exact masks, 30° -> 8.9° overall) and hurts occluded ones (21.5° -> 23.9° below
+    half visible), 9.0° -> 8.7° in all; under the camera model 15.7° -> 17.7°, so it is off by
     default. ``erode_px`` trims mask borders; it
     is 0 by default because the shipped network was fine-tuned on un-eroded masks (1 px of erosion
     raised its error with exact masks from 9.2° to 12.5°).

@@ -17,6 +17,7 @@ from perception.pipeline import (
     estimate_cap_top,
     within_depth_of_core,
 )
+from perception.pointcloud import MIN_POINTS
 from perception.pose.estimator import PoseEstimator
 from perception.pose.pose_net import PoseNet, PoseNetConfig
 
@@ -154,6 +155,13 @@ def test_within_depth_of_core_drops_the_soil_beyond_a_rim_and_keeps_the_rim():
     assert tight.sum() < cap.sum() and not (tight & ~cap).any()
     tiny = r2 <= 2 ** 2  # too small an interior to judge by: unchanged
     assert np.array_equal(within_depth_of_core(tiny, depth, 0.008), tiny)
+    # A 2-px sliver of another cap, 8 px from this one's interior, has no interior of its own
+    # to be judged by: it stays, whatever its depth.
+    sliver = np.zeros_like(cap)
+    sliver[20:40, 60:62] = True
+    depth_with_sliver = depth.copy()
+    depth_with_sliver[sliver] = 0.39
+    assert np.array_equal(within_depth_of_core(cap | sliver, depth_with_sliver, 0.008), cap | sliver)
 
 
 def test_the_pipeline_cuts_its_clouds_from_the_trimmed_masks():
@@ -178,6 +186,14 @@ def test_within_depth_of_core_only_removes_border_pixels(seed, tolerance):
 
     core = cv2.erode(mask.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     assert (out[core] | ~mask[core]).all()
+    # What it removes lies deeper than the tolerance below some interior pixel within 3 px.
+    interior = np.where(core & (depth > 0), depth, 0.0).astype(np.float32)
+    deepest = cv2.dilate(interior, np.ones((7, 7), np.uint8))
+    removed = mask & ~out
+    if np.count_nonzero(core & (depth > 0)) >= MIN_POINTS:
+        assert (deepest[removed] > 0).all() and (depth[removed] > deepest[removed] + tolerance).all()
+    else:
+        assert not removed.any()
 
 
 def test_cap_top_is_the_apex_of_a_dome_seen_from_one_side() -> None:
