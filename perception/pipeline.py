@@ -114,8 +114,10 @@ def within_depth_of_core(mask: np.ndarray, depth: np.ndarray, tolerance_m: float
     cap's own rim (which falls away by millimetres) stays and the soil beyond it goes, however
     close the soil is to the cap elsewhere (which ``above_soil``'s ring cannot tell). Parts too
     thin to have an interior beside them (a sliver of a cap between its neighbours) have
-    nothing to be judged by and stay. A mask with fewer than ``MIN_POINTS`` interior pixels is
-    returned unchanged.
+    nothing to be judged by and stay — so does a lobe of soil reaching more than ``core_px + 1``
+    pixels beyond the interior, the price of keeping slivers. Pixels without valid depth (0, NaN,
+    inf) add no points to a cloud and are kept. A mask with fewer than ``MIN_POINTS`` interior
+    pixels is returned unchanged.
     """
     core = cv2.erode(mask.astype(np.uint8), np.ones((2 * core_px + 1,) * 2, np.uint8)).astype(bool)
     valid = np.isfinite(depth) & (depth > 0)
@@ -123,7 +125,7 @@ def within_depth_of_core(mask: np.ndarray, depth: np.ndarray, tolerance_m: float
         return mask
     interior = np.where(core & valid, depth, 0.0).astype(np.float32)
     deepest = cv2.dilate(interior, np.ones((2 * core_px + 3,) * 2, np.uint8))
-    border = mask & ~core & ((deepest == 0) | (depth <= deepest + tolerance_m))
+    border = mask & ~core & (~valid | (deepest == 0) | (depth <= deepest + tolerance_m))
     return core | border
 
 

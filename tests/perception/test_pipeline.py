@@ -155,13 +155,19 @@ def test_within_depth_of_core_drops_the_soil_beyond_a_rim_and_keeps_the_rim():
     assert tight.sum() < cap.sum() and not (tight & ~cap).any()
     tiny = r2 <= 2 ** 2  # too small an interior to judge by: unchanged
     assert np.array_equal(within_depth_of_core(tiny, depth, 0.008), tiny)
-    # A 2-px sliver of another cap, 8 px from this one's interior, has no interior of its own
+    # A 2-px sliver of another cap, 12 px from this one's interior, has no interior of its own
     # to be judged by: it stays, whatever its depth.
     sliver = np.zeros_like(cap)
     sliver[20:40, 60:62] = True
     depth_with_sliver = depth.copy()
     depth_with_sliver[sliver] = 0.39
     assert np.array_equal(within_depth_of_core(cap | sliver, depth_with_sliver, 0.008), cap | sliver)
+    # Spilled pixels without valid depth carry no points: kept alike, whether 0, NaN or inf.
+    holes = depth.copy()
+    holes[30, 51], holes[30, 29], holes[41, 40] = 0.0, np.nan, np.inf
+    kept = within_depth_of_core(spilled, holes, 0.008)
+    assert kept[30, 51] and kept[30, 29] and kept[41, 40]
+    assert np.array_equal(kept & np.isfinite(holes) & (holes > 0), cap & np.isfinite(holes) & (holes > 0))
 
 
 def test_the_pipeline_cuts_its_clouds_from_the_trimmed_masks():

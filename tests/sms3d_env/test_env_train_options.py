@@ -97,13 +97,19 @@ def test_staged_reward_orders_the_stages():
 
 
 @settings(max_examples=100, deadline=None)
-@given(height=st.floats(0.005, 0.2), weight=st.floats(1.5, 10.0))
-def test_the_reach_funnel_pays_more_above_the_cap_than_beside_it(height, weight):
+@given(height=st.floats(0.005, 0.2), weight=st.floats(1.5, 10.0), tilt=st.floats(0.0, 0.6),
+       scale=st.floats(0.5, 3.0))
+def test_the_reach_funnel_pays_more_above_the_cap_than_beside_it(height, weight, tilt, scale):
+    # The funnel follows the *estimated* axis, whatever its tilt and length.
+    unit = np.array([math.sin(tilt), 0.0, math.cos(tilt)])
+    across = np.array([math.cos(tilt), 0.0, -math.sin(tilt)])
+
     def approach(tool_pos, w):
-        return reward_terms(_reward_state(tool_pos=tool_pos, lateral_weight=w))["progress"]
+        state = _reward_state(tool_pos=tool_pos, est_axis=scale * unit, lateral_weight=w)
+        return reward_terms(state)["progress"]
 
     top = np.array([0.0, 0.0, -0.05])
-    above, beside = top + [0.0, 0.0, height], top + [height, 0.0, 0.0]
+    above, beside = top + height * unit, top + height * across
     assert approach(above, 1.0) == pytest.approx(approach(beside, 1.0))  # the plain distance
     assert approach(above, weight) == pytest.approx(approach(above, 1.0))  # on the axis: unchanged
     assert approach(beside, weight) < approach(above, weight)
@@ -112,7 +118,7 @@ def test_the_reach_funnel_pays_more_above_the_cap_than_beside_it(height, weight)
 def test_the_reach_funnel_needs_the_staged_reward():
     with pytest.raises(ValueError, match="reach_lateral_weight shapes the staged reward only"):
         sms3d_env.SMS3DPickEnv(reach_lateral_weight=3.0)
-    gym.make("SMS3DPickTrain-v0", scene_config=SMALL, reach_lateral_weight=3.0)  # accepted
+    gym.make("SMS3DPickTrain-v0", scene_config=SMALL, reach_lateral_weight=3.0).close()  # accepted
 
 
 def test_scripted_success_is_reported_with_reward_terms():
@@ -234,6 +240,7 @@ BAD_ARGS = [
     ({"horizon": 0}, "horizon"),
     ({"reward_type": "staged", "reach_lateral_weight": 0.5}, "reach_lateral_weight"),
     ({"reward_type": "staged", "reach_lateral_weight": float("inf")}, "reach_lateral_weight"),
+    ({"reward_type": "staged", "reach_lateral_weight": float("nan")}, "reach_lateral_weight"),
 ]
 
 
