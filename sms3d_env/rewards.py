@@ -84,9 +84,9 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     ``lateral_weight`` (1: the plain distance; > 1 a funnel that pays more for arriving along the
     axis than from the side, where the cup's rim knocks the cap off its root; either side of the
     cap top alike); align = 1 - tanh(3/rad x angle between the cup axis and the estimated stem
-    axis, reversed). Per step the reward is at most 1, reached only at success; the success step also pays ``steps_left`` (the
-    return of holding that maximum until the time limit), so finishing early is never worth less
-    than loitering in a stage below it. A bruise pays 0 (it ends the episode). The root load is
+    axis, reversed). Per step the reward is at most 1, reached only at success; the success step
+    also pays ``steps_left`` (the return of holding that maximum until the time limit), so
+    finishing early is never worth less than loitering in a stage below it. A bruise pays 0 (it ends the episode). The root load is
     privileged simulation state; it shapes the reward only and is never observed.
     """
     if s.bruised:
