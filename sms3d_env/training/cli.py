@@ -44,6 +44,7 @@ def _cmd_train(args: Any) -> int:
                           out=args.out, eval_freq=args.eval_freq, eval_episodes=args.eval_episodes,
                           checkpoint_freq=args.checkpoint_freq, learning_rate=args.learning_rate,
                           learning_rate_final=args.learning_rate_final,
+                          learning_rate_by_wall=args.learning_rate_by_wall,
                           target_kl=args.target_kl, posture_target=args.posture_target,
                           pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
                           reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model)
@@ -66,6 +67,7 @@ def _cmd_train_bc(args: Any) -> int:
     rl_only = {"--pregrasp-start": (args.pregrasp_start, "its demonstrations start at home"),
                "--pregrasp-anneal": (args.pregrasp_anneal, "its demonstrations start at home"),
                "--learning-rate-final": (args.learning_rate_final is not None, "its cloning uses a constant rate"),
+               "--learning-rate-by-wall": (args.learning_rate_by_wall, "its cloning uses a constant rate"),
                "--init-model": (args.init_model, "it clones from scratch"),
                "--reach-lateral-weight": (args.reach_lateral_weight != 1, "it is trained on actions, not rewards"),
                "--residual-until-held": (args.residual_until_held, "it trains no residual")}
@@ -161,6 +163,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--learning-rate-final", type=float, default=None, metavar="RATE",
                    help="rl/residual: fall linearly from --learning-rate to this by the last of --steps "
                         "(default: a constant rate)")
+    p.add_argument("--learning-rate-by-wall", action="store_true",
+                   help="rl/residual: let that fall run over whichever ends first, --steps or --max-wall-s "
+                        "(so a run stopped by its wall limit ends at the final rate; needs both)")
     p.add_argument("--target-kl", type=float, default=None,
                    help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "
                         "passes 1.5 x this (default: no limit)")

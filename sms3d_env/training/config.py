@@ -55,7 +55,12 @@ class TrainConfig:
             ``LinearSchedule``; the PPO paper anneals its rate so), so that one run lowers the rate
             that a second phase, started from the first's checkpoint, lowered by hand. The schedule runs over
             ``total_steps``: with ``max_wall_s``, set ``total_steps`` to what fits in it (PPO on 2
-            envs here: 480–640 steps/s), or the rate stops short of its final value.
+            envs here: 480–640 steps/s), or the rate stops short of its final value; or set
+            ``learning_rate_by_wall``.
+        learning_rate_by_wall: the falling rate runs over whichever ends first, ``total_steps`` or
+            ``max_wall_s`` (:class:`sms3d_env.training.schedules.WallAwareLinearSchedule`), so a
+            run stopped by its wall limit ends at ``learning_rate_final`` whatever its step rate.
+            Needs both; makes the rate depend on the machine's speed.
         target_kl: PPO stops a round of updates early once the approximate KL divergence from the
             rollout's policy exceeds 1.5 x this (None: no limit, SB3's default). A residual on a
             working controller needs it: without one its updates ran at KL 0.03-0.07 and undid
@@ -109,6 +114,7 @@ class TrainConfig:
     checkpoint_freq: int = 50_000
     learning_rate: float = 3e-4
     learning_rate_final: float | None = None
+    learning_rate_by_wall: bool = False
     target_kl: float | None = None
     posture_target: str = "estimate"
     pregrasp_start: float = 0.0
@@ -178,6 +184,11 @@ class TrainConfig:
         if self.learning_rate_final is not None and not (
                 isinstance(self.learning_rate_final, (int, float)) and 0 < self.learning_rate_final < 1):
             raise bad("learning_rate_final", "must be None or in (0, 1)")
+        if not isinstance(self.learning_rate_by_wall, bool):
+            raise bad("learning_rate_by_wall", "must be a bool")
+        if self.learning_rate_by_wall and (self.learning_rate_final is None or self.max_wall_s is None):
+            raise bad("learning_rate_by_wall", "needs learning_rate_final (the rate to fall to) and "
+                                               "max_wall_s (the wall it falls over)")
         if self.target_kl is not None and not (isinstance(self.target_kl, (int, float))
                                                and math.isfinite(self.target_kl) and self.target_kl > 0):
             raise bad("target_kl", "must be None or a finite number > 0")

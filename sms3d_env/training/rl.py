@@ -23,6 +23,7 @@ from sms3d_env.training.actor import VECNORM_FILE, observation_stats_path
 from sms3d_env.training.config import TrainConfig, env_options
 from sms3d_env.training.curriculum import pregrasp_annealing
 from sms3d_env.training.envs import normalized, vec_env
+from sms3d_env.training.schedules import WallAwareLinearSchedule
 
 
 def _tensorboard_available() -> bool:
@@ -37,8 +38,11 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.utils import LinearSchedule
 
-    rate = cfg.learning_rate if cfg.learning_rate_final is None else \
-        LinearSchedule(cfg.learning_rate, cfg.learning_rate_final, end_fraction=1.0)
+    rate: Any = cfg.learning_rate
+    if cfg.learning_rate_by_wall:
+        rate = WallAwareLinearSchedule(cfg.learning_rate, cfg.learning_rate_final, cfg.max_wall_s)
+    elif cfg.learning_rate_final is not None:
+        rate = LinearSchedule(cfg.learning_rate, cfg.learning_rate_final, end_fraction=1.0)
     policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": float(cfg.log_std_init)}
     if cfg.algo == "ppo":
         n_steps = cfg.n_steps

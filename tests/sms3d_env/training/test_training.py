@@ -210,7 +210,7 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
 
 @pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
                                   ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
-                                  ["--residual-until-held"], ["--reach-lateral-weight", "3"]],
+                                  ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()

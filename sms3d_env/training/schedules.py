@@ -1,0 +1,51 @@
+"""Learning-rate schedules for runs that a wall-clock limit may stop before their last step.
+
+SB3 drives a schedule by ``progress_remaining``, the share of ``total_steps`` still to run. A run
+stopped by ``max_wall_s`` never sees the end of that schedule: measured (benchmarks/RESULTS.md,
+session 14) a rate meant to fall from 3e-4 to 3e-5 over 3.2M steps was still 8.4e-5 when the 2 h
+limit stopped it at 2.62M, because the machine's share of CPU set the step rate, not the command.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+
+class WallAwareLinearSchedule:
+    """A rate falling linearly from ``start`` to ``end`` over whichever runs out first: the run's
+    steps (SB3's progress) or ``max_wall_s`` seconds of wall clock, counted from the first call
+    (SB3 first calls it when the model builds its optimiser, just before training).
+
+    The rate at a call is ``start + (end - start) × min(1, max(1 − progress_remaining,
+    elapsed / max_wall_s))``. So a run that the wall limit stops ends at ``end``, and a run that
+    finishes its steps first keeps the schedule of :class:`stable_baselines3.common.utils.LinearSchedule`
+    wherever its steps are ahead of the clock. The clock makes the rate depend on the machine's
+    speed: two runs of one seed differ once the wall is ahead (as they already do where
+    ``max_wall_s`` stops them).
+
+    Pickled with a saved model; a loaded copy starts its clock afresh.
+    """
+
+    def __init__(self, start: float, end: float, max_wall_s: float,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        if not max_wall_s > 0:
+            raise ValueError(f"WallAwareLinearSchedule.max_wall_s must be > 0, got {max_wall_s!r}")
+        self.start, self.end, self.max_wall_s = float(start), float(end), float(max_wall_s)
+        self.clock = clock
+        self._t0: float | None = None
+
+    def fraction_done(self, progress_remaining: float) -> float:
+        """How far along the schedule is, in [0, 1]: the larger of the step and wall fractions."""
+        now = self.clock()
+        if self._t0 is None:
+            self._t0 = now
+        by_wall = (now - self._t0) / self.max_wall_s
+        return min(1.0, max(1.0 - float(progress_remaining), by_wall, 0.0))
+
+    def __call__(self, progress_remaining: float) -> float:
+        return self.start + (self.end - self.start) * self.fraction_done(progress_remaining)
+
+    def __getstate__(self) -> dict:
+        # One process's clock means nothing in another (and a test's fake clock may not pickle).
+        return {**self.__dict__, "_t0": None, "clock": time.perf_counter}
