@@ -1,14 +1,20 @@
 """Where the scripted picker fails under pose error: episodes whose approach never reaches the
-stand-off point ("stalled": the picker is still in its approach phase when the episode ends),
-for each IK posture weight (``ControllerConfig.posture_cost``), on the same seeded episodes.
+stand-off point ("stalled": a reachable target, the episode run to its time limit, the picker
+still in its approach phase), for each IK posture weight (``ControllerConfig.posture_cost``), on
+the same seeded episodes.
 
 The controller's posture task is a soft cost beside the tool's frame task, not a strict
-null-space objective; a stalled approach is one where the posture's pull balances the commanded
-tool motion. Each row: success with its 95 % Wilson interval, stalled episodes, failure causes,
-and an exact McNemar test against the first posture weight (paired by episode).
+null-space objective, so where the tool's motion costs much joint motion (near the Jaco's wrist
+singularity) the posture's pull can balance the commanded motion. Each row: success among
+reachable targets with its 95 % Wilson interval, stalled episodes, failure causes, and an exact
+McNemar test against the first posture weight (paired by episode).
+
+Seeds 3,000,000 + i by default: disjoint from the demonstrations (0 ..), eval-policy's default
+(1,000,000 ..) and bench_policy.py's (2,000,000 ..), so a posture weight chosen here is not
+tuned on the episodes that evaluate pickers.
 
 Usage: python benchmarks/bench_approach_stalls.py [--errors 0 20 30] [--posture-costs 0.01 0.001]
-       [--episodes 100] [--beds 25] [--seed 1000000]
+       [--episodes 100] [--beds 25] [--seed 3000000]
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ from sms3d_env.study.report import mcnemar_p, wilson_interval  # noqa: E402
 
 
 def run(error: float, posture_cost: float, beds: int, episodes: int, seed: int) -> list[tuple[bool, str, bool]]:
-    """``(success, failure cause, stalled)`` per episode."""
+    """``(success, failure cause, stalled)`` per episode whose target is reachable."""
     kw = {"pose_source": "noisy", "pose_error_deg": error} if error > 0 else {}
     env, picker = make_picker_env(PickerSpec("scripted"), controller=ControllerConfig(posture_cost=posture_cost),
                                   scene_config=generator.SceneConfig().replace(placement__num_mushrooms=beds), **kw)
@@ -40,12 +46,12 @@ def run(error: float, posture_cost: float, beds: int, episodes: int, seed: int) 
         for s in tqdm(range(seed, seed + episodes), desc=f"{error:g} deg, posture {posture_cost:g}", leave=False):
             obs, info = env.reset(seed=s)
             picker.reset()
-            left_approach, done = False, False
-            while not done:
+            left_approach, terminated, truncated = False, False, False
+            while not (terminated or truncated):
                 obs, _, terminated, truncated, info = env.step(picker(obs))
-                done = terminated or truncated
                 left_approach |= picker.phase != "approach"
-            rows.append((bool(info["is_success"]), info["failure_cause"], not left_approach))
+            if info["reachable"]:
+                rows.append((bool(info["is_success"]), info["failure_cause"], truncated and not left_approach))
     finally:
         env.close()
     return rows
@@ -58,7 +64,7 @@ def main() -> None:
                    help="ControllerConfig.posture_cost values; the first is the reference (the default 0.01)")
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--beds", type=int, default=25, help="mushrooms per bed")
-    p.add_argument("--seed", type=int, default=1_000_000, help="first episode seed")
+    p.add_argument("--seed", type=int, default=3_000_000, help="first episode seed")
     args = p.parse_args()
 
     print(f"| error | posture cost | success | 95 % Wilson | stalled in the approach | failures | McNemar p vs {args.posture_costs[0]:g} |")

@@ -5,6 +5,7 @@
 | ``TrainConfig`` (RL settings, saved as ``config.json``), ``env_kwargs`` | :mod:`~sms3d_env.training.config` |
 | the training envs (``make_env``, ``vec_env``, ``normalized``) | :mod:`~sms3d_env.training.envs` |
 | PPO/SAC training (``train_policy``) | :mod:`~sms3d_env.training.rl` |
+| a falling rate that ends by steps or by wall clock (``WallAwareLinearSchedule``) | :mod:`~sms3d_env.training.schedules` |
 | the start-state curriculum that follows home-start success (``pregrasp_annealing``) | :mod:`~sms3d_env.training.curriculum` |
 | behaviour cloning + DAgger of the scripted picker (``BCConfig``, ``train_bc``) | :mod:`~sms3d_env.training.imitation` |
 | residual policies on top of the scripted picker (``ResidualPicker``) | :mod:`~sms3d_env.training.residual` |
@@ -22,7 +23,7 @@ from generator.lazy import lazy_exports
 _EXPORTS = {
     "ALGOS": "config", "ENV_IDS": "config", "POSE_SOURCES": "config", "RECIPES": "config",
     "REWARD_TYPES": "config", "TrainConfig": "config", "env_kwargs": "config",
-    "make_env": "envs", "train_policy": "rl",
+    "make_env": "envs", "train_policy": "rl", "WallAwareLinearSchedule": "schedules",
     "BCConfig": "imitation", "train_bc": "imitation", "ResidualPicker": "residual",
     "NormalizedFlatten": "policy_features",
     "SHIPPED_POLICY": "actor", "VECNORM_FILE": "actor", "PolicyActor": "actor", "load_model": "actor",

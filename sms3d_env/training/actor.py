@@ -51,11 +51,19 @@ def observation_stats_path(model_path: str | Path) -> Path | None:
     return checkpoint if checkpoint is not None and checkpoint.is_file() else None
 
 
+def _no_rate(_progress_remaining: float) -> float:
+    return 0.0
+
+
 def load_model(model_path: str | Path, algo: str | None = None) -> Any:
-    """Load a saved PPO/SAC model; the algorithm comes from ``config.json`` beside it if not given."""
+    """Load a saved PPO/SAC model for acting; the algorithm comes from ``config.json`` beside it if
+    not given. Its learning-rate schedule is not unpickled (acting needs none, and a schedule class
+    a run was saved with, e.g. :class:`~sms3d_env.training.schedules.WallAwareLinearSchedule`,
+    need not be importable where the model is used)."""
     from stable_baselines3 import PPO, SAC
 
     path = Path(model_path)
+    no_schedule = {"learning_rate": 0.0, "lr_schedule": _no_rate}
     if algo is None:
         cfg_file = saved_config_path(path)
         if cfg_file is not None:
@@ -63,11 +71,11 @@ def load_model(model_path: str | Path, algo: str | None = None) -> Any:
     if algo is not None:
         if algo not in ALGOS:
             raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
-        return (PPO if algo == "ppo" else SAC).load(str(path), device="cpu")
+        return (PPO if algo == "ppo" else SAC).load(str(path), device="cpu", custom_objects=no_schedule)
     try:
-        return PPO.load(str(path), device="cpu")
+        return PPO.load(str(path), device="cpu", custom_objects=no_schedule)
     except Exception:  # not a PPO archive
-        return SAC.load(str(path), device="cpu")
+        return SAC.load(str(path), device="cpu", custom_objects=no_schedule)
 
 
 class PolicyActor:

@@ -165,7 +165,8 @@ def register(subparsers: Any) -> None:
                         "(default: a constant rate)")
     p.add_argument("--learning-rate-by-wall", action="store_true",
                    help="rl/residual: let that fall run over whichever ends first, --steps or --max-wall-s "
-                        "(so a run stopped by its wall limit ends at the final rate; needs both)")
+                        "(so a run stopped by its wall limit ends at the final rate; needs "
+                        "--learning-rate-final and --max-wall-s)")
     p.add_argument("--target-kl", type=float, default=None,
                    help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "
                         "passes 1.5 x this (default: no limit)")

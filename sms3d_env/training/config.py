@@ -60,7 +60,8 @@ class TrainConfig:
         learning_rate_by_wall: the falling rate runs over whichever ends first, ``total_steps`` or
             ``max_wall_s`` (:class:`sms3d_env.training.schedules.WallAwareLinearSchedule`), so a
             run stopped by its wall limit ends at ``learning_rate_final`` whatever its step rate.
-            Needs both; makes the rate depend on the machine's speed.
+            Needs ``learning_rate_final`` and ``max_wall_s``; makes the rate depend on the
+            machine's speed.
         target_kl: PPO stops a round of updates early once the approximate KL divergence from the
             rollout's policy exceeds 1.5 x this (None: no limit, SB3's default). A residual on a
             working controller needs it: without one its updates ran at KL 0.03-0.07 and undid

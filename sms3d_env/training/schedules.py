@@ -8,6 +8,7 @@ limit stopped it at 2.62M, because the machine's share of CPU set the step rate,
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 
@@ -24,19 +25,21 @@ class WallAwareLinearSchedule:
     speed: two runs of one seed differ once the wall is ahead (as they already do where
     ``max_wall_s`` stops them).
 
-    Pickled with a saved model; a loaded copy starts its clock afresh.
+    Pickled with a saved model; a loaded copy (and any ``copy.copy``/``deepcopy``) starts its
+    clock afresh at its first call.
     """
 
     def __init__(self, start: float, end: float, max_wall_s: float,
                  clock: Callable[[], float] = time.perf_counter) -> None:
-        if not max_wall_s > 0:
+        if max_wall_s is None or not (math.isfinite(max_wall_s) and max_wall_s > 0):
             raise ValueError(f"WallAwareLinearSchedule.max_wall_s must be > 0, got {max_wall_s!r}")
         self.start, self.end, self.max_wall_s = float(start), float(end), float(max_wall_s)
         self.clock = clock
         self._t0: float | None = None
 
     def fraction_done(self, progress_remaining: float) -> float:
-        """How far along the schedule is, in [0, 1]: the larger of the step and wall fractions."""
+        """How far along the schedule is, in [0, 1]: the larger of the step and wall fractions
+        (the first call starts the clock)."""
         now = self.clock()
         if self._t0 is None:
             self._t0 = now

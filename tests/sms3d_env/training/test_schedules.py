@@ -41,7 +41,7 @@ def test_the_rate_follows_the_clock_once_it_is_ahead_of_the_steps():
     assert rate(0.1) == pytest.approx(3e-5)
 
 
-@given(st.floats(0, 1), st.floats(0, 1e4), st.floats(1e-6, 0.5), st.floats(1e-6, 0.5))
+@given(st.floats(-0.5, 1.5), st.floats(0, 1e4), st.floats(1e-6, 0.5), st.floats(1e-6, 0.5))
 def test_the_rate_stays_between_its_ends(progress_remaining, elapsed, start, end):
     clock = FakeClock()
     rate = WallAwareLinearSchedule(start, end, max_wall_s=600.0, clock=clock)
@@ -60,16 +60,17 @@ def test_a_pickled_schedule_starts_its_clock_afresh():
     assert loaded(1.0) == pytest.approx(1e-3)
 
 
-def test_a_wall_of_zero_is_refused_by_name():
+@pytest.mark.parametrize("wall", [0.0, -1.0, float("inf"), float("nan"), None])
+def test_a_wall_that_is_not_a_positive_time_is_refused_by_name(wall):
     with pytest.raises(ValueError, match="max_wall_s"):
-        WallAwareLinearSchedule(1e-3, 1e-4, max_wall_s=0.0)
+        WallAwareLinearSchedule(1e-3, 1e-4, max_wall_s=wall)
 
 
 @pytest.mark.parametrize("kwargs", [
     {"learning_rate_by_wall": True, "max_wall_s": 60.0},
     {"learning_rate_by_wall": True, "learning_rate_final": 1e-5},
     {"learning_rate_by_wall": 1, "learning_rate_final": 1e-5, "max_wall_s": 60.0},
-])
-def test_the_config_refuses_a_wall_schedule_without_its_ends(kwargs):
+], ids=["no final rate", "no wall", "not a bool"])
+def test_the_config_refuses_a_wall_schedule_it_cannot_run(kwargs):
     with pytest.raises(ValueError, match="learning_rate_by_wall"):
         TrainConfig(**kwargs)

@@ -120,6 +120,8 @@ def test_config_roundtrip_and_frozen():
 def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path):
     """What a residual fine-tuning run depends on reaches PPO and, through ``config.json``, every
     later evaluation of the policy."""
+    from stable_baselines3 import PPO
+
     from sms3d_env.training.actor import PolicyActor
 
     cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, target_kl=0.01,
@@ -127,7 +129,7 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
                       **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
     assert cfg.env_kwargs()["posture_target"] == "tool"
     train_policy(cfg)
-    model = load_model(tmp_path / "model.zip")
+    model = PPO.load(str(tmp_path / "model.zip"), device="cpu")
     assert model.target_kl == 0.01 and model.learning_rate == 1e-4
     assert PolicyActor(tmp_path / "model.zip").env_options == {"posture_target": "tool"}
     assert "posture_target" not in TrainConfig().env_kwargs()
@@ -235,6 +237,24 @@ def test_the_learning_rate_falls_linearly_to_its_final_value(tmp_path):
     assert len(rates) == 3 and rates == pytest.approx(1e-3 + (1e-4 - 1e-3) * (steps - 128) / 512)
     with pytest.raises(ValueError, match="learning_rate_final"):
         TrainConfig(learning_rate_final=0.0)
+
+
+def test_a_wall_schedule_is_trained_with_saved_and_loaded(tmp_path):
+    """``learning_rate_by_wall``: the run's model carries the wall-aware schedule through
+    ``model.save``/``PPO.load``; loading for acting does not need it at all."""
+    from stable_baselines3 import PPO
+
+    from sms3d_env.training import WallAwareLinearSchedule
+
+    cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, learning_rate=1e-3,
+                      learning_rate_final=1e-4, learning_rate_by_wall=True, max_wall_s=3600.0,
+                      out=str(tmp_path), **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
+    train_policy(cfg)
+    loaded = PPO.load(str(tmp_path / "model.zip"), device="cpu")
+    assert isinstance(loaded.learning_rate, WallAwareLinearSchedule)
+    assert loaded.lr_schedule(1.0) == pytest.approx(1e-3, rel=1e-3)
+    assert loaded.lr_schedule(0.0) == pytest.approx(1e-4)
+    assert load_model(tmp_path / "model.zip").learning_rate == 0.0
 
 
 def test_eval_rejects_bad_arguments(tmp_path):
