@@ -46,12 +46,12 @@ def run(error: float, posture_cost: float, beds: int, episodes: int, seed: int) 
         for s in tqdm(range(seed, seed + episodes), desc=f"{error:g} deg, posture {posture_cost:g}", leave=False):
             obs, info = env.reset(seed=s)
             picker.reset()
-            left_approach, terminated, truncated = False, False, False
+            terminated = truncated = False
             while not (terminated or truncated):
                 obs, _, terminated, truncated, info = env.step(picker(obs))
-                left_approach |= picker.phase != "approach"
             if info["reachable"]:
-                rows.append((bool(info["is_success"]), info["failure_cause"], truncated and not left_approach))
+                # The picker's phases never return to the approach: its last phase says it all.
+                rows.append((bool(info["is_success"]), info["failure_cause"], truncated and picker.phase == "approach"))
     finally:
         env.close()
     return rows
