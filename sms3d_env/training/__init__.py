@@ -7,6 +7,7 @@
 | PPO/SAC training (``train_policy``) | :mod:`~sms3d_env.training.rl` |
 | a falling rate that ends by steps or by wall clock (``WallAwareLinearSchedule``) | :mod:`~sms3d_env.training.schedules` |
 | the start-state curriculum that follows home-start success (``pregrasp_annealing``) | :mod:`~sms3d_env.training.curriculum` |
+| the critic warm-up that freezes PPO's actor first (``critic_warmup``) | :mod:`~sms3d_env.training.warmup` |
 | behaviour cloning + DAgger of the scripted picker (``BCConfig``, ``train_bc``) | :mod:`~sms3d_env.training.imitation` |
 | residual policies on top of the scripted picker (``ResidualPicker``) | :mod:`~sms3d_env.training.residual` |
 | the shipped policies' features extractor (``NormalizedFlatten``) | :mod:`~sms3d_env.training.policy_features` |
@@ -24,6 +25,7 @@ _EXPORTS = {
     "ALGOS": "config", "ENV_IDS": "config", "POSE_SOURCES": "config", "RECIPES": "config",
     "REWARD_TYPES": "config", "TrainConfig": "config", "env_kwargs": "config",
     "make_env": "envs", "train_policy": "rl", "WallAwareLinearSchedule": "schedules",
+    "critic_warmup": "warmup",
     "BCConfig": "imitation", "train_bc": "imitation", "ResidualPicker": "residual",
     "NormalizedFlatten": "policy_features",
     "SHIPPED_POLICY": "actor", "VECNORM_FILE": "actor", "PolicyActor": "actor", "load_model": "actor",

@@ -47,7 +47,8 @@ def _cmd_train(args: Any) -> int:
                           learning_rate_by_wall=args.learning_rate_by_wall,
                           target_kl=args.target_kl, posture_target=args.posture_target,
                           pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
-                          reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model)
+                          reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model,
+                          critic_warmup_steps=args.critic_warmup_steps)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -70,7 +71,8 @@ def _cmd_train_bc(args: Any) -> int:
                "--learning-rate-by-wall": (args.learning_rate_by_wall, "its cloning uses a constant rate"),
                "--init-model": (args.init_model, "it clones from scratch"),
                "--reach-lateral-weight": (args.reach_lateral_weight != 1, "it is trained on actions, not rewards"),
-               "--residual-until-held": (args.residual_until_held, "it trains no residual")}
+               "--residual-until-held": (args.residual_until_held, "it trains no residual"),
+               "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic")}
     for flag, (given, why) in rl_only.items():
         if given:
             print(f"error: {flag} applies to the rl and residual recipes (the bc recipe: {why})")
@@ -170,6 +172,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--target-kl", type=float, default=None,
                    help="rl/residual with PPO: stop a round of updates once the KL from the rollout policy "
                         "passes 1.5 x this (default: no limit)")
+    p.add_argument("--critic-warmup-steps", type=int, default=defaults.critic_warmup_steps, metavar="N",
+                   help="rl/residual with PPO: freeze the actor for the first N env steps so that the critic "
+                        "first learns the starting policy's returns (a residual's: the scripted picker's; "
+                        "default 0: none)")
     bc = p.add_argument_group("behaviour cloning (--recipe bc)")
     bc.add_argument("--demo-episodes", type=int, default=400, help="scripted episodes (failures dropped)")
     bc.add_argument("--demo-mushrooms", type=int, nargs="+", default=[10, 25], help="bed sizes cycled through")

@@ -85,6 +85,9 @@ class TrainConfig:
             folder. The run's own counters start afresh: its step count, learning-rate schedule
             and ``pregrasp_anneal``'s success window (the share is back at ``pregrasp_start``
             until 10 home-start episodes have ended).
+        critic_warmup_steps: PPO: > 0 freezes the actor for this many env steps so that the
+            critic first learns the returns of the policy the run starts from (a residual's:
+            the scripted picker's; :mod:`sms3d_env.training.warmup`); 0: no warm-up.
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
             standard deviation of 1 on every normalised command; a residual starts quieter).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
@@ -122,6 +125,7 @@ class TrainConfig:
     pregrasp_anneal: bool = False
     reach_lateral_weight: float = 1.0
     init_model: str | None = None
+    critic_warmup_steps: int = 0
     batch_size: int = 256
     n_steps: int = 1024
     buffer_size: int = 100_000
@@ -168,7 +172,8 @@ class TrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise bad(name, "must be an integer >= 1")
-        for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose", "scene_pool"):
+        for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose", "scene_pool",
+                     "critic_warmup_steps"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise bad(name, "must be an integer >= 0")
@@ -217,6 +222,8 @@ class TrainConfig:
             # its replay buffer: the run would not continue the saved one.
             raise bad("init_model", "continues PPO runs only (SAC's entropy coefficient and replay "
                                     "buffer are not restored by loading its weights)")
+        if self.critic_warmup_steps and self.algo != "ppo":
+            raise bad("critic_warmup_steps", "freezes PPO's actor only; leave it 0 with SAC")
         if not (0 < self.gamma <= 1):
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):

@@ -24,6 +24,7 @@ from sms3d_env.training.config import TrainConfig, env_options
 from sms3d_env.training.curriculum import pregrasp_annealing
 from sms3d_env.training.envs import normalized, vec_env
 from sms3d_env.training.schedules import WallAwareLinearSchedule
+from sms3d_env.training.warmup import critic_warmup
 
 
 def _tensorboard_available() -> bool:
@@ -191,6 +192,8 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
                                                 save_vecnormalize=cfg.normalize))
         if cfg.pregrasp_anneal:
             callbacks.append(pregrasp_annealing(cfg.pregrasp_start))
+        if cfg.critic_warmup_steps:
+            callbacks.append(critic_warmup(cfg.critic_warmup_steps))
         if cfg.max_wall_s is not None:
             callbacks.append(_wall_clock_callback(cfg.max_wall_s))
         t0 = time.perf_counter()

@@ -103,6 +103,8 @@ def test_sac_short_run(tmp_path):
     ({"pregrasp_start": -0.1}, "pregrasp_start"),
     ({"env_id": "SMS3DPickTrain-v0", "reach_lateral_weight": 0.5}, "reach_lateral_weight"),
     ({"reach_lateral_weight": 3.0}, "reach_lateral_weight"),  # the dense reward has no reach funnel
+    ({"critic_warmup_steps": -1}, "critic_warmup_steps"),
+    ({"algo": "sac", "critic_warmup_steps": 100}, "critic_warmup_steps"),
 ])
 def test_invalid_config_names_field(kw, field):
     with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
@@ -212,7 +214,8 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
 
 @pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
                                   ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
-                                  ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"]],
+                                  ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"],
+                                  ["--critic-warmup-steps", "1000"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
