@@ -36,8 +36,8 @@ def actor_parameters(policy: Any) -> list[Any]:
 def critic_warmup(steps: int) -> Any:
     """An SB3 callback for PPO: the updates on the first ``steps`` env steps (over all envs) train
     the critic alone; no gradient reaches :func:`actor_parameters` until a rollout ends past
-    ``steps``. With rollouts of ``n_steps × n_envs`` steps that is ``ceil(steps / (n_steps ×
-    n_envs))`` critic-only updates. Logged as ``train/actor_frozen`` (1: the update that follows
+    ``steps``. With rollouts of ``n_steps × n_envs`` steps that is ``floor(steps / (n_steps ×
+    n_envs))`` critic-only updates (none when ``steps`` is shorter than one rollout). Logged as ``train/actor_frozen`` (1: the update that follows
     the row's rollout trains the critic alone)."""
     from stable_baselines3.common.callbacks import BaseCallback
 

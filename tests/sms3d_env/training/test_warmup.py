@@ -42,6 +42,10 @@ def _changed(before, params) -> bool:
     return any(not torch.equal(b, p.detach()) for b, p in zip(before, params, strict=True))
 
 
+def _critic_parameters(policy) -> list[torch.nn.Parameter]:
+    return [*policy.value_net.parameters(), *policy.mlp_extractor.value_net.parameters()]
+
+
 class ActorAtRolloutStart(BaseCallback):
     """The actor's parameters as each rollout starts (i.e. after the update before it)."""
 
@@ -59,7 +63,7 @@ class ActorAtRolloutStart(BaseCallback):
 def test_the_critic_learns_while_the_actor_is_frozen():
     model = _ppo()
     actor = actor_parameters(model.policy)
-    critic = list(model.policy.value_net.parameters()) + list(model.policy.mlp_extractor.value_net.parameters())
+    critic = _critic_parameters(model.policy)
     actor0, critic0 = _snapshot(actor), _snapshot(critic)
     model.learn(256, callback=critic_warmup(1_000))
     assert not _changed(actor0, actor)
@@ -81,7 +85,7 @@ def test_the_updates_on_the_warmup_steps_leave_the_actor_and_the_next_train_it()
 def test_actor_and_critic_parameters_partition_the_policy():
     policy = _ppo().policy
     actor = {id(p) for p in actor_parameters(policy)}
-    critic = {id(p) for p in [*policy.value_net.parameters(), *policy.mlp_extractor.value_net.parameters()]}
+    critic = {id(p) for p in _critic_parameters(policy)}
     assert id(policy.log_std) in actor
     assert not actor & critic
     assert actor | critic == {id(p) for p in policy.parameters()}
