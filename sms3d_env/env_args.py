@@ -14,6 +14,7 @@ from sms3d_env.targets import RULES
 
 SUCTION_MODES = ("momentary", "latched")
 POSTURE_TARGETS = ("estimate", "tool")
+REWARD_POSES = ("estimate", "truth")
 RENDER_MODES = ("rgb_array", "depth_array")
 
 
@@ -37,7 +38,7 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
                    pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
                    image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
                    scene_config: Any, posture_target: Any = "estimate", pregrasp_start: Any = 0.0,
-                   reach_lateral_weight: Any = 1.0) -> None:
+                   reach_lateral_weight: Any = 1.0, reward_pose: Any = "estimate") -> None:
     """Every check of the env's keyword arguments that needs no model (``tool`` is the resolved
     tool, ``robot.tool`` or the ``tool`` argument)."""
     if render_mode is not None and render_mode not in RENDER_MODES:
@@ -59,6 +60,11 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
     if reach_lateral_weight != 1 and reward_type != "staged":
         raise ValueError(f"reach_lateral_weight shapes the staged reward only; with reward_type="
                          f"{reward_type!r} it would be ignored (got {reach_lateral_weight!r})")
+    if reward_pose not in REWARD_POSES:
+        raise ValueError(f"reward_pose must be one of {REWARD_POSES}, got {reward_pose!r}")
+    if reward_pose != "estimate" and reward_type == "sparse":
+        raise ValueError("reward_pose shapes the dense and staged rewards; the sparse reward has no "
+                         "approach term it could change")
     _int_at_least("horizon", horizon, 1)
     _int_at_least("scene_pool", scene_pool)
     _int_at_least("pool_seed", pool_seed)

@@ -29,8 +29,10 @@ ALIGN_SCALE = 3.0  # 1/rad
 class RewardState:
     tool_pos: np.ndarray
     tool_axis: np.ndarray  # cup +z (approach direction)
-    est_cap_top: np.ndarray
-    est_axis: np.ndarray
+    # The pose the shaping pulls towards: the *estimated* cap top and stem axis (the env's
+    # default), or the true ones (``reward_pose="truth"``, a training option).
+    goal_cap_top: np.ndarray
+    goal_axis: np.ndarray
     gripped_target: bool
     target_detached: bool
     lift: float  # m the target's cap top rose since reset
@@ -39,14 +41,14 @@ class RewardState:
     bruised: bool
     root_utilisation: float = 0.0  # target root load / its detachment capacity (>= 1 detaches)
     steps_left: int = 0  # control steps until the time limit (the staged success bonus)
-    lateral_weight: float = 1.0  # staged reach: weight of the offset across the estimated axis
+    lateral_weight: float = 1.0  # staged reach: weight of the offset across the goal axis
 
 
 def compute_reward(s: RewardState, reward_type: str) -> float:
     """Sparse: 0 on success, -1 otherwise (Gymnasium-Robotics convention).
 
-    Dense: -distance to the estimated cap top (m) + 0.1 x alignment of the cup axis with the
-    estimated stem axis + 0.5 sealed on the target + 1 detached *and held* + 2 x lift fraction
+    Dense: -distance to the goal cap top (m) + 0.1 x alignment of the cup axis with the goal
+    stem axis (the estimated pose unless the env's ``reward_pose="truth"``) + 0.5 sealed on the target + 1 detached *and held* + 2 x lift fraction
     while held + 5 success - 2 bruise. The detach and lift terms pay only while the cup holds the
     target: paid for detachment alone, PPO learned to knock targets off their roots and collect
     the bonus every step without ever holding one.
@@ -57,8 +59,8 @@ def compute_reward(s: RewardState, reward_type: str) -> float:
         return 0.0 if s.success else -1.0
     if reward_type == "staged":
         return sum(reward_terms(s).values())
-    dist = math.dist(s.tool_pos, s.est_cap_top)
-    align = -float(s.tool_axis @ s.est_axis)
+    dist = math.dist(s.tool_pos, s.goal_cap_top)
+    align = -float(s.tool_axis @ s.goal_axis)
     r = -dist + 0.1 * align
     held = s.gripped_target
     r += 0.5 * held + 1.0 * (s.target_detached and held)
@@ -79,12 +81,13 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     | detached | holding the detached target | 0.6 + 0.3 x lift fraction |
     | success | detached, held, lifted | 1 + ``steps_left`` |
 
-    reach = 1 - mean(tanh(5/m x d), tanh(30/m x d)), d the distance from the tool to the
-    *estimated* cap top with its component across the estimated stem axis weighted by
+    reach = 1 - mean(tanh(5/m x d), tanh(30/m x d)), d the distance from the tool to the goal
+    cap top (the *estimated* one unless the env's ``reward_pose="truth"``) with its component
+    across the goal stem axis weighted by
     ``lateral_weight`` (1: the plain distance; > 1 a funnel that pays more for arriving along the
     axis than from the side, where the cup's rim knocks the cap off its root; either side of the
-    cap top alike); align = 1 - tanh(3/rad x angle between the cup axis and the estimated stem
-    axis, reversed). Per step the reward is at most 1, reached only at success; the success step
+    cap top alike); align = 1 - tanh(3/rad x angle between the cup axis and the goal stem axis,
+    reversed). Per step the reward is at most 1, reached only at success; the success step
     also pays ``steps_left`` (the return of holding that maximum until the time limit), so
     finishing early is never worth less than loitering in a stage below it. A bruise pays 0 (it ends the episode). The root load is
     privileged simulation state; it shapes the reward only and is never observed.
@@ -101,19 +104,19 @@ def reward_terms(s: RewardState) -> dict[str, float]:
         return {"stage": STAGE_FLOORS["sealed"], "progress": ROOT_WEIGHT * load, "success_bonus": 0.0}
     d = _reach_distance(s)
     reach = 1.0 - sum(math.tanh(k * d) for k in REACH_SCALES) / len(REACH_SCALES)
-    cos = float(np.clip(-(s.tool_axis @ s.est_axis) / np.linalg.norm(s.est_axis), -1.0, 1.0))
+    cos = float(np.clip(-(s.tool_axis @ s.goal_axis) / np.linalg.norm(s.goal_axis), -1.0, 1.0))
     align = 1.0 - math.tanh(ALIGN_SCALE * math.acos(cos))
     return {"stage": STAGE_FLOORS["approach"], "progress": APPROACH_WEIGHT * reach * align,
             "success_bonus": 0.0}
 
 
 def _reach_distance(s: RewardState) -> float:
-    """The staged reach term's distance (m): tool to estimated cap top, the part across the
-    estimated stem axis scaled by ``s.lateral_weight``."""
+    """The staged reach term's distance (m): tool to goal cap top, the part across the goal
+    stem axis scaled by ``s.lateral_weight``."""
     if s.lateral_weight == 1.0:  # bit-identical to the reward before the weight existed
-        return math.dist(s.tool_pos, s.est_cap_top)
-    offset = np.asarray(s.tool_pos, float) - s.est_cap_top
-    axis = s.est_axis / np.linalg.norm(s.est_axis)
+        return math.dist(s.tool_pos, s.goal_cap_top)
+    offset = np.asarray(s.tool_pos, float) - s.goal_cap_top
+    axis = s.goal_axis / np.linalg.norm(s.goal_axis)
     along = float(offset @ axis)
     across = float(np.linalg.norm(offset - along * axis))
     return math.hypot(along, s.lateral_weight * across)

@@ -13,6 +13,7 @@ from sms3d_env.training.config import (
     POSE_SOURCES,
     POSTURE_TARGETS,
     RECIPES,
+    REWARD_POSES,
     REWARD_TYPES,
     TrainConfig,
 )
@@ -48,7 +49,7 @@ def _cmd_train(args: Any) -> int:
                           target_kl=args.target_kl, posture_target=args.posture_target,
                           pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
                           reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model,
-                          critic_warmup_steps=args.critic_warmup_steps)
+                          critic_warmup_steps=args.critic_warmup_steps, reward_pose=args.reward_pose)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -72,7 +73,8 @@ def _cmd_train_bc(args: Any) -> int:
                "--init-model": (args.init_model, "it clones from scratch"),
                "--reach-lateral-weight": (args.reach_lateral_weight != 1, "it is trained on actions, not rewards"),
                "--residual-until-held": (args.residual_until_held, "it trains no residual"),
-               "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic")}
+               "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic"),
+               "--reward-pose": (args.reward_pose != "estimate", "it is trained on actions, not rewards")}
     for flag, (given, why) in rl_only.items():
         if given:
             print(f"error: {flag} applies to the rl and residual recipes (the bc recipe: {why})")
@@ -158,6 +160,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--reach-lateral-weight", type=float, default=defaults.reach_lateral_weight, metavar="W",
                    help="rl/residual, staged reward: weight the tool's offset across the estimated stem axis by W "
                         "in the reach term (an approach funnel; default 1, the plain distance)")
+    p.add_argument("--reward-pose", choices=REWARD_POSES, default=defaults.reward_pose,
+                   help="rl/residual: the pose the reward's approach terms pull towards: estimate (default, the "
+                        "observed one) or truth (the true pose; for training under pose error, so that "
+                        "correcting a wrong estimate pays; the observation is the same)")
     p.add_argument("--init-model", default=None, metavar="PATH",
                    help="rl/residual: start from this saved model (model.zip, a checkpoint or best/best_model.zip; "
                         "its observation statistics too with --normalize) instead of a fresh policy")

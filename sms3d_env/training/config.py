@@ -13,6 +13,7 @@ REWARD_TYPES = ("dense", "sparse", "staged")
 ENV_IDS = ("SMS3DPick-v0", "SMS3DPickTrain-v0")
 RECIPES = ("rl", "bc", "residual")
 POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.env_args.POSTURE_TARGETS (kept free of scipy here)
+REWARD_POSES = ("estimate", "truth")  # = sms3d_env.env_args.REWARD_POSES
 
 
 def env_options(posture_target: str = "estimate") -> dict[str, Any]:
@@ -78,6 +79,10 @@ class TrainConfig:
         reach_lateral_weight: the staged reward's approach funnel (the env's
             ``reach_lateral_weight``): the weight of the tool's offset across the estimated stem
             axis in the reach term (1: the plain distance). Needs the staged reward.
+        reward_pose: the pose the reward's approach terms pull towards (the env's
+            ``reward_pose``): ``"estimate"`` (default) or ``"truth"`` (for pickers trained under
+            pose error: a correction towards the true axis pays). Training envs only; the
+            observation is the same either way.
         init_model: a saved model of this algorithm and architecture (``model.zip``, a checkpoint,
             ``best/best_model.zip``) whose weights, and with ``normalize`` observation
             statistics, the run starts from instead of a fresh policy (e.g. a second phase at a
@@ -124,6 +129,7 @@ class TrainConfig:
     pregrasp_start: float = 0.0
     pregrasp_anneal: bool = False
     reach_lateral_weight: float = 1.0
+    reward_pose: str = "estimate"
     init_model: str | None = None
     critic_warmup_steps: int = 0
     batch_size: int = 256
@@ -215,6 +221,10 @@ class TrainConfig:
         if self.reach_lateral_weight != 1 and self.env_id == "SMS3DPick-v0" and self.reward_type != "staged":
             raise bad("reach_lateral_weight", "shapes the staged reward only (use SMS3DPickTrain-v0 or "
                                               "reward_type='staged')")
+        if self.reward_pose not in REWARD_POSES:
+            raise bad("reward_pose", f"must be one of {REWARD_POSES}")
+        if self.reward_pose != "estimate" and self.env_id == "SMS3DPick-v0" and self.reward_type == "sparse":
+            raise bad("reward_pose", "shapes the dense and staged rewards; the sparse reward has none")
         if self.init_model is not None and not (isinstance(self.init_model, str) and self.init_model):
             raise bad("init_model", "must be None or the path of a saved model")
         if self.init_model is not None and self.algo != "ppo":
@@ -251,6 +261,8 @@ class TrainConfig:
             kw["pregrasp_start"] = float(self.pregrasp_start)
         if self.reach_lateral_weight != 1:
             kw["reach_lateral_weight"] = float(self.reach_lateral_weight)
+        if self.reward_pose != "estimate":
+            kw["reward_pose"] = self.reward_pose
         kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale,
                 "residual_until_held": self.residual_until_held, **kw}

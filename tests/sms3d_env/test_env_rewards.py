@@ -4,8 +4,8 @@ from sms3d_env.rewards import RewardState, compute_reward
 
 
 def _state(**kw):
-    base = dict(tool_pos=np.zeros(3), tool_axis=np.array([0, 0, -1.0]), est_cap_top=np.array([0, 0, 0.1]),
-                est_axis=np.array([0, 0, 1.0]), gripped_target=False, target_detached=False, lift=0.0,
+    base = dict(tool_pos=np.zeros(3), tool_axis=np.array([0, 0, -1.0]), goal_cap_top=np.array([0, 0, 0.1]),
+                goal_axis=np.array([0, 0, 1.0]), gripped_target=False, target_detached=False, lift=0.0,
                 lift_goal=0.03, success=False, bruised=False)
     base.update(kw)
     return RewardState(**base)

@@ -59,7 +59,7 @@ def test_training_id_sets_the_options_and_passes_check_env():
 
 def _reward_state(**kw):
     base = dict(tool_pos=np.zeros(3), tool_axis=np.array([0.0, 0.0, -1.0]),
-                est_cap_top=np.array([0.0, 0.0, -0.05]), est_axis=np.array([0.0, 0.0, 1.0]),
+                goal_cap_top=np.array([0.0, 0.0, -0.05]), goal_axis=np.array([0.0, 0.0, 1.0]),
                 gripped_target=False, target_detached=False, lift=0.0, lift_goal=0.03,
                 success=False, bruised=False, root_utilisation=0.0, steps_left=100)
     base.update(kw)
@@ -105,7 +105,7 @@ def test_the_reach_funnel_pays_more_above_the_cap_than_beside_it(height, weight,
     across = np.array([math.cos(tilt), 0.0, -math.sin(tilt)])
 
     def approach(tool_pos, w):
-        state = _reward_state(tool_pos=tool_pos, est_axis=scale * unit, lateral_weight=w)
+        state = _reward_state(tool_pos=tool_pos, goal_axis=scale * unit, lateral_weight=w)
         return reward_terms(state)["progress"]
 
     top = np.array([0.0, 0.0, -0.05])
@@ -119,6 +119,43 @@ def test_the_reach_funnel_needs_the_staged_reward():
     with pytest.raises(ValueError, match="reach_lateral_weight shapes the staged reward only"):
         sms3d_env.SMS3DPickEnv(reach_lateral_weight=3.0)
     gym.make("SMS3DPickTrain-v0", scene_config=SMALL, reach_lateral_weight=3.0).close()  # accepted
+
+
+def _approach_progress(env, goal_cap_top, goal_axis):
+    """The staged approach term for the env's current tool pose and the given goal pose."""
+    u = env.unwrapped
+    d, site = u.data, u.world.tool_site
+    state = _reward_state(tool_pos=d.site_xpos[site].copy(), tool_axis=d.site_xmat[site, 2::3].copy(),
+                          goal_cap_top=np.asarray(goal_cap_top, float), goal_axis=np.asarray(goal_axis, float))
+    return reward_terms(state)["progress"]
+
+
+def test_reward_pose_truth_shapes_towards_the_true_pose_and_observes_the_same():
+    kw = dict(scene_config=SMALL, pose_source="noisy", pose_error_deg=30.0)
+    envs = {pose: gym.make("SMS3DPickTrain-v0", reward_pose=pose, **kw) for pose in ("estimate", "truth")}
+    obs, infos = {}, {}
+    for pose, env in envs.items():
+        env.reset(seed=3)
+        obs[pose], _, _, _, infos[pose] = env.step(np.zeros(7, np.float32))
+    for key in obs["estimate"]:
+        np.testing.assert_array_equal(obs["estimate"][key], obs["truth"][key])  # the reward is all that differs
+    truth_env, estimate_env = envs["truth"].unwrapped, envs["estimate"].unwrapped
+    inst = truth_env.scene.instances[infos["truth"]["target"]]
+    true_axis = np.asarray(inst.rotation)[:, 2]
+    assert math.degrees(math.acos(np.clip(true_axis @ estimate_env.target_pose[3:], -1, 1))) == pytest.approx(30.0, abs=1e-6)
+    assert infos["truth"]["reward_progress"] == pytest.approx(_approach_progress(envs["truth"], inst.cap_top, true_axis))
+    assert infos["estimate"]["reward_progress"] == pytest.approx(
+        _approach_progress(envs["estimate"], estimate_env.target_pose[:3], estimate_env.target_pose[3:]))
+    assert infos["truth"]["reward_progress"] != pytest.approx(infos["estimate"]["reward_progress"])
+
+
+def test_reward_pose_truth_is_the_default_reward_when_the_pose_is_exact():
+    rewards = {}
+    for pose in ("estimate", "truth"):
+        env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL, reward_pose=pose)
+        env.reset(seed=1)
+        rewards[pose] = [env.step(np.full(7, 0.3, np.float32))[1] for _ in range(5)]
+    assert rewards["truth"] == rewards["estimate"]
 
 
 def test_scripted_success_is_reported_with_reward_terms():
@@ -241,6 +278,8 @@ BAD_ARGS = [
     ({"reward_type": "staged", "reach_lateral_weight": 0.5}, "reach_lateral_weight"),
     ({"reward_type": "staged", "reach_lateral_weight": float("inf")}, "reach_lateral_weight"),
     ({"reward_type": "staged", "reach_lateral_weight": float("nan")}, "reach_lateral_weight"),
+    ({"reward_pose": "oracle"}, "reward_pose"),
+    ({"reward_type": "sparse", "reward_pose": "truth"}, "reward_pose"),
 ]
 
 

@@ -17,6 +17,7 @@ from sms3d_env.training import (
     register,
     train_policy,
 )
+from sms3d_env.training import config as training_config
 
 FAST = dict(num_mushrooms=8, max_episode_steps=40, eval_freq=128, eval_episodes=1,
             checkpoint_freq=128, verbose=0, net_arch=(32, 32))
@@ -105,6 +106,8 @@ def test_sac_short_run(tmp_path):
     ({"reach_lateral_weight": 3.0}, "reach_lateral_weight"),  # the dense reward has no reach funnel
     ({"critic_warmup_steps": -1}, "critic_warmup_steps"),
     ({"algo": "sac", "critic_warmup_steps": 100}, "critic_warmup_steps"),
+    ({"reward_pose": "oracle"}, "reward_pose"),
+    ({"reward_type": "sparse", "reward_pose": "truth"}, "reward_pose"),  # nothing to shape
 ])
 def test_invalid_config_names_field(kw, field):
     with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
@@ -141,6 +144,16 @@ def test_the_reach_funnel_reaches_the_training_env():
     kw = TrainConfig(env_id="SMS3DPickTrain-v0", reach_lateral_weight=3.0).env_kwargs()
     assert kw["reach_lateral_weight"] == 3.0
     assert "reach_lateral_weight" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
+
+
+def test_the_reward_pose_reaches_the_training_env_only():
+    from sms3d_env.env_args import REWARD_POSES
+
+    assert training_config.REWARD_POSES == REWARD_POSES
+    cfg = TrainConfig(env_id="SMS3DPickTrain-v0", reward_pose="truth")
+    assert cfg.env_kwargs()["reward_pose"] == "truth"
+    assert "reward_pose" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
+    assert "reward_pose" not in training_config.env_options(cfg.posture_target)  # evaluation envs: the default reward
 
 
 def test_a_residual_until_held_is_trained_and_rebuilt_so(tmp_path):
@@ -215,7 +228,7 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
 @pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
                                   ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
                                   ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"],
-                                  ["--critic-warmup-steps", "1000"]],
+                                  ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
