@@ -94,6 +94,7 @@ class PolicyActor:
         self.env_options = dict(self.saved.get("env_options", {}))
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
         self.residual_until_held = bool(self.saved.get("residual_until_held", False))
+        self.residual_approach_only = bool(self.saved.get("residual_approach_only", False))
         self.model = load_model(path, algo)
         self.obs_stats = None
         stats = observation_stats_path(path)
@@ -108,7 +109,7 @@ class PolicyActor:
         was trained in (if any), with ``kwargs`` (bed size, pose source, ...) for the rest."""
         from sms3d_env.training.envs import make_env
 
-        return make_env(self.env_id, self.residual_scale, self.residual_until_held,
+        return make_env(self.env_id, self.residual_scale, self.residual_until_held, self.residual_approach_only,
                         **{**kwargs, **self.env_options})
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:

@@ -28,14 +28,17 @@ def _cmd_train(args: Any) -> int:
     noisy = args.pose_error_deg > 0 or args.pose_error_range is not None
     pose_source = args.pose_source or ("noisy" if noisy else "oracle")
     residual = args.recipe == "residual"
-    if args.residual_until_held and not residual:
-        print("error: --residual-until-held applies to --recipe residual")
-        return 2
+    for flag, given in (("--residual-until-held", args.residual_until_held),
+                        ("--residual-approach-only", args.residual_approach_only)):
+        if given and not residual:
+            print(f"error: {flag} applies to --recipe residual")
+            return 2
     try:
         cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v0" if residual else args.env_id,
                           normalize=args.normalize or residual, scene_pool=args.scene_pool,
                           residual_scale=args.residual_scale if residual else 0.0,
                           residual_until_held=args.residual_until_held,
+                          residual_approach_only=args.residual_approach_only,
                           pose_error_range_deg=args.pose_error_range,
                           log_std_init=args.log_std_init if args.log_std_init is not None
                           else (-1.6 if residual else 0.0),
@@ -73,6 +76,7 @@ def _cmd_train_bc(args: Any) -> int:
                "--init-model": (args.init_model, "it clones from scratch"),
                "--reach-lateral-weight": (args.reach_lateral_weight != 1, "it is trained on actions, not rewards"),
                "--residual-until-held": (args.residual_until_held, "it trains no residual"),
+               "--residual-approach-only": (args.residual_approach_only, "it trains no residual"),
                "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic"),
                "--reward-pose": (args.reward_pose != "estimate", "it is trained on actions, not rewards")}
     for flag, (given, why) in rl_only.items():
@@ -137,6 +141,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--residual-until-held", action="store_true",
                    help="--recipe residual: correct only the approach and touch-down; once the seal holds "
                         "the scripted picker's twist and lift run alone")
+    p.add_argument("--residual-approach-only", action="store_true",
+                   help="--recipe residual: correct only the approach to the stand-off point; the scripted "
+                        "picker's descent, seal, twist and lift run alone")
     p.add_argument("--log-std-init", type=float, default=None,
                    help="initial log standard deviation of the policy (default 0; -1.6 for --recipe residual)")
     p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)

@@ -41,6 +41,9 @@ class TrainConfig:
             (:class:`sms3d_env.training.residual.ResidualPicker` with this scale); 0: the policy acts alone.
         residual_until_held: the residual corrects only until the seal (or grip) holds; the
             scripted picker's twist and lift then run alone. Needs ``residual_scale`` > 0.
+        residual_approach_only: the residual corrects only the scripted picker's approach; its
+            descent, seal, twist and lift run alone. Needs ``residual_scale`` > 0; excludes
+            ``residual_until_held``.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
             uniformly in that range (``pose_source`` must then be ``"noisy"`` and
             ``pose_error_deg`` 0).
@@ -106,6 +109,7 @@ class TrainConfig:
     scene_pool: int = 0
     residual_scale: float = 0.0
     residual_until_held: bool = False
+    residual_approach_only: bool = False
     pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
     max_wall_s: float | None = None
@@ -166,6 +170,13 @@ class TrainConfig:
             raise bad("residual_until_held", "must be a bool")
         if self.residual_until_held and not self.residual_scale:
             raise bad("residual_until_held", "applies to a residual (residual_scale > 0)")
+        if not isinstance(self.residual_approach_only, bool):
+            raise bad("residual_approach_only", "must be a bool")
+        if self.residual_approach_only and not self.residual_scale:
+            raise bad("residual_approach_only", "applies to a residual (residual_scale > 0)")
+        if self.residual_approach_only and self.residual_until_held:
+            raise bad("residual_approach_only", "already drops the residual before the seal (leave "
+                                                "residual_until_held False)")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:
@@ -265,7 +276,8 @@ class TrainConfig:
             kw["reward_pose"] = self.reward_pose
         kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale,
-                "residual_until_held": self.residual_until_held, **kw}
+                "residual_until_held": self.residual_until_held,
+                "residual_approach_only": self.residual_approach_only, **kw}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:

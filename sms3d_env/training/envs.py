@@ -8,9 +8,10 @@ from typing import Any
 
 
 def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual_until_held: bool = False,
-             **kwargs: Any) -> Any:
+             residual_approach_only: bool = False, **kwargs: Any) -> Any:
     """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``
-    > 0 wraps the env in a ``ResidualPicker`` (``until_held=residual_until_held``)."""
+    > 0 wraps the env in a ``ResidualPicker`` (``until_held=residual_until_held``,
+    ``approach_only=residual_approach_only``)."""
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the env ids)
@@ -19,7 +20,8 @@ def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual
     if residual_scale > 0:
         from sms3d_env.training.residual import ResidualPicker
 
-        env = ResidualPicker(env, residual_scale, until_held=residual_until_held)
+        env = ResidualPicker(env, residual_scale, until_held=residual_until_held,
+                             approach_only=residual_approach_only)
     return env
 
 

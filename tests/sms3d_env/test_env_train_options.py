@@ -366,6 +366,44 @@ def test_a_residual_until_held_leaves_the_twist_and_lift_to_the_scripted_picker(
         ResidualPicker(plain, until_held=1)
 
 
+class _RecordCommands(gym.Wrapper):
+    """Keeps every command the wrapped env receives."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.commands = []
+
+    def step(self, action):
+        self.commands.append(np.array(action, np.float32))
+        return self.env.step(action)
+
+
+def test_an_approach_only_residual_leaves_the_descent_on_to_the_scripted_picker():
+    from sms3d_env.training.residual import ResidualPicker
+
+    recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene_config=SMALL))
+    env = ResidualPicker(recorder, scale=0.5, approach_only=True)
+    obs, _ = env.reset(seed=2)
+    # A push for the first 10 steps, none until the scripted picker has reached its stand-off
+    # point, and a push on every step after that (which the wrapper must drop).
+    phases, bases, pushes, done = [], [], [], False
+    while not done:
+        phases.append(env._base_phase)
+        bases.append(obs["base_action"].copy())
+        pushes.append(0.5 if len(phases) <= 10 or phases[-1] != "approach" else 0.0)
+        obs, _, terminated, truncated, _ = env.step(np.full(7, pushes[-1], np.float32))
+        done = terminated or truncated
+    approach = [p == "approach" for p in phases]
+    assert approach[0] and not all(approach)  # the episode left the approach
+    for in_approach, push, base, command in zip(approach, pushes, bases, recorder.commands):
+        expected = np.clip(base + 0.5 * push, -1, 1) if in_approach else base
+        np.testing.assert_allclose(command, expected, atol=1e-6)
+    with pytest.raises(ValueError, match="approach_only"):
+        ResidualPicker(recorder, approach_only=True, until_held=True)
+    with pytest.raises(ValueError, match="approach_only"):
+        ResidualPicker(recorder, approach_only="yes")
+
+
 def test_uniform_noisy_pose_errs_within_its_range():
     from sms3d_env.pose_sources import UniformNoisyPose
 

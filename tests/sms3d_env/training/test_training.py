@@ -107,6 +107,8 @@ def test_sac_short_run(tmp_path):
     ({"critic_warmup_steps": -1}, "critic_warmup_steps"),
     ({"algo": "sac", "critic_warmup_steps": 100}, "critic_warmup_steps"),
     ({"reward_pose": "oracle"}, "reward_pose"),
+    ({"residual_approach_only": True}, "residual_approach_only"),  # no residual
+    ({"residual_scale": 0.5, "residual_approach_only": True, "residual_until_held": True}, "residual_approach_only"),
     ({"reward_type": "sparse", "reward_pose": "truth"}, "reward_pose"),  # nothing to shape
 ])
 def test_invalid_config_names_field(kw, field):
@@ -156,22 +158,24 @@ def test_the_reward_pose_reaches_the_training_env_only():
     assert "reward_pose" not in training_config.env_options(cfg.posture_target)  # evaluation envs: the default reward
 
 
-def test_a_residual_until_held_is_trained_and_rebuilt_so(tmp_path):
-    """``residual_until_held`` reaches the training env's wrapper and, through ``config.json``,
-    the env every later evaluation builds for the policy."""
+@pytest.mark.parametrize("option", ["residual_until_held", "residual_approach_only"])
+def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option):
+    """``residual_until_held`` / ``residual_approach_only`` reach the training env's wrapper and,
+    through ``config.json``, the env every later evaluation builds for the policy."""
     from sms3d_env.training.actor import PolicyActor
 
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_until_held=True,
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, **{option: True},
                       normalize=True, total_steps=128, n_steps=128, batch_size=64, out=str(tmp_path),
                       **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
     train_policy(cfg)
     env = PolicyActor(tmp_path / "model.zip").make_env()
     try:
-        assert env.until_held and env.scale == 0.5
+        wrapper_flag = {"residual_until_held": "until_held", "residual_approach_only": "approach_only"}[option]
+        assert getattr(env, wrapper_flag) and env.scale == 0.5
     finally:
         env.close()
-    with pytest.raises(ValueError, match="residual_until_held"):
-        TrainConfig(residual_until_held=True)
+    with pytest.raises(ValueError, match=option):
+        TrainConfig(**{option: True})
 
 
 def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
@@ -228,7 +232,8 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
 @pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
                                   ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
                                   ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"],
-                                  ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"]],
+                                  ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"],
+                                  ["--residual-approach-only"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
