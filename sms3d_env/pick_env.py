@@ -33,7 +33,7 @@ from sms3d_env.env_args import (
 )
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
-from sms3d_env.pose_sources import PoseSource, make_pose_source
+from sms3d_env.pose_sources import OraclePose, PoseSource, make_pose_source
 from sms3d_env.rewards import RewardState, compute_reward, reward_terms
 from sms3d_env.robot import RobotConfig
 from sms3d_env.scene_source import SceneSource
@@ -285,9 +285,8 @@ class SMS3DPickEnv(gym.Env):
                                           max_tilt_deg=self.max_tilt_deg)
         estimate = self.pose_source(scene, target, self.np_random)
         self.target_pose = np.concatenate([estimate.cap_top, estimate.stem_axis])
-        truth = scene.instances[target]
-        self._reward_goal = (self.target_pose if self.reward_pose == "estimate" else
-                             np.concatenate([truth.cap_top, np.asarray(truth.rotation, float)[:, 2]]))
+        goal = estimate if self.reward_pose == "estimate" else OraclePose()(scene, target, self.np_random)
+        self._reward_goal = np.concatenate([goal.cap_top, goal.stem_axis])
         self._disown_renderers()
         self.world = w = build_world(scene, target, self.robot_cfg, self.free_radius,
                                      self.control_dt / self.substeps, self.scene_source.models,
