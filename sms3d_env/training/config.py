@@ -12,6 +12,7 @@ POSE_SOURCES = ("oracle", "noisy")
 REWARD_TYPES = ("dense", "sparse", "staged")
 ENV_IDS = ("SMS3DPick-v0", "SMS3DPickTrain-v0")
 RECIPES = ("rl", "bc", "residual")
+VEC_ENVS = ("subproc", "dummy")
 POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.env_args.POSTURE_TARGETS (kept free of scipy here)
 REWARD_POSES = ("estimate", "truth")  # = sms3d_env.env_args.REWARD_POSES
 
@@ -29,7 +30,17 @@ class TrainConfig:
         algo: ``"ppo"`` or ``"sac"``.
         total_steps: environment steps over all envs.
         max_wall_s: stop early (after the current step) once this many seconds have passed.
-        n_envs: parallel envs (``SubprocVecEnv`` if > 1, else ``DummyVecEnv``).
+        n_envs: parallel envs, stepped as ``vec_env`` says.
+        vec_env: ``"subproc"`` (default): one worker process per env when ``n_envs`` > 1
+            (SB3's ``SubprocVecEnv``); ``"dummy"``: every env in the training process, one after
+            another (``DummyVecEnv``). On 2 cores ``"dummy"`` ran faster: a pipe round trip to a
+            worker cost about as much as the env step it carried (benchmarks/RESULTS.md,
+            "Session 19"), and the second core stays free.
+        flat_observation: the dict observation flattened into one vector (gymnasium's
+            ``FlattenObservation``, outermost) and SB3's ``MlpPolicy`` on it instead of
+            ``MultiInputPolicy``: the same inputs and network, one normalisation and one tensor
+            per step instead of one per observation key. Saved in ``config.json``;
+            ``PolicyActor`` rebuilds the flattened env.
         pose_source, pose_error_deg, position_noise: the target pose estimate used in training.
         env_id: ``"SMS3DPick-v0"`` (its options as given here) or ``"SMS3DPickTrain-v0"`` (the
             learnable options: latched suction, staged reward, dead-end episode end, task
@@ -114,6 +125,8 @@ class TrainConfig:
     total_steps: int = 100_000
     max_wall_s: float | None = None
     n_envs: int = 1
+    vec_env: str = "subproc"
+    flat_observation: bool = False
     pose_source: str = "oracle"
     pose_error_deg: float = 0.0
     position_noise: float = 0.0
@@ -163,6 +176,10 @@ class TrainConfig:
             raise bad("reward_type", "is set by SMS3DPickTrain-v0 (staged); leave it at its default")
         if not isinstance(self.normalize, bool):
             raise bad("normalize", "must be a bool")
+        if self.vec_env not in VEC_ENVS:
+            raise bad("vec_env", f"must be one of {VEC_ENVS}")
+        if not isinstance(self.flat_observation, bool):
+            raise bad("flat_observation", "must be a bool")
         if not (isinstance(self.residual_scale, (int, float)) and math.isfinite(self.residual_scale)
                 and 0 <= self.residual_scale <= 2):
             raise bad("residual_scale", "must be a number in [0, 2]")
@@ -277,7 +294,8 @@ class TrainConfig:
         kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale,
                 "residual_until_held": self.residual_until_held,
-                "residual_approach_only": self.residual_approach_only, **kw}
+                "residual_approach_only": self.residual_approach_only,
+                "flat_observation": self.flat_observation, **kw}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:

@@ -8,10 +8,11 @@ from typing import Any
 
 
 def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual_until_held: bool = False,
-             residual_approach_only: bool = False, **kwargs: Any) -> Any:
+             residual_approach_only: bool = False, flat_observation: bool = False, **kwargs: Any) -> Any:
     """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``
     > 0 wraps the env in a ``ResidualPicker`` (``until_held=residual_until_held``,
-    ``approach_only=residual_approach_only``)."""
+    ``approach_only=residual_approach_only``); ``flat_observation`` flattens the dict observation
+    into one vector (gymnasium's ``FlattenObservation``, outermost)."""
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the env ids)
@@ -22,16 +23,21 @@ def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual
 
         env = ResidualPicker(env, residual_scale, until_held=residual_until_held,
                              approach_only=residual_approach_only)
+    if flat_observation:
+        env = gym.wrappers.FlattenObservation(env)
     return env
 
 
-def vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | None) -> Any:
+def vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | None,
+            kind: str = "subproc") -> Any:
+    """``n_envs`` monitored envs seeded ``seed + i``: in worker processes (``kind="subproc"``,
+    when ``n_envs`` > 1) or in this process (``"dummy"``)."""
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     return make_vec_env(functools.partial(make_env, **kwargs), n_envs=n_envs, seed=seed,
                         monitor_dir=monitor_dir,
-                        vec_env_cls=SubprocVecEnv if n_envs > 1 else DummyVecEnv,
+                        vec_env_cls=SubprocVecEnv if n_envs > 1 and kind == "subproc" else DummyVecEnv,
                         monitor_kwargs={"info_keywords": ("is_success", "failure_cause", "start")})
 
 

@@ -4,7 +4,8 @@ learnable options of ``SMS3DPickTrain-v0``.
 ``train_policy(TrainConfig(...))`` trains with vectorised envs (``SubprocVecEnv`` for
 ``n_envs > 1``), evaluates periodically (``eval/success_rate`` from the env's ``is_success``),
 writes CSV (and TensorBoard, if installed) logs, checkpoints and ``model.zip`` plus
-``config.json`` and ``summary.json`` into ``out``; ``normalize=True`` standardises observations
+``config.json`` and ``summary.json`` into ``out``; ``flat_observation`` trains an ``MlpPolicy`` on
+the flattened observation; ``normalize=True`` standardises observations
 (SB3's ``VecNormalize``, saved as ``vecnormalize.pkl`` beside the model). The demonstration-started
 recipe lives in :mod:`sms3d_env.training.imitation`.
 """
@@ -19,7 +20,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from sms3d_env.training.actor import VECNORM_FILE, observation_stats_path
+from sms3d_env.training.actor import VECNORM_FILE, observation_stats_path, saved_config_path
 from sms3d_env.training.config import TrainConfig, env_options
 from sms3d_env.training.curriculum import pregrasp_annealing
 from sms3d_env.training.envs import normalized, vec_env
@@ -45,13 +46,14 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
     elif cfg.learning_rate_final is not None:
         rate = LinearSchedule(cfg.learning_rate, cfg.learning_rate_final, end_fraction=1.0)
     policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": float(cfg.log_std_init)}
+    policy = "MlpPolicy" if cfg.flat_observation else "MultiInputPolicy"
     if cfg.algo == "ppo":
         n_steps = cfg.n_steps
         batch = min(cfg.batch_size, n_steps * cfg.n_envs)
-        return PPO("MultiInputPolicy", env, learning_rate=rate, n_steps=n_steps,
+        return PPO(policy, env, learning_rate=rate, n_steps=n_steps,
                    batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
                    seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
-    return SAC("MultiInputPolicy", env, learning_rate=rate, buffer_size=cfg.buffer_size,
+    return SAC(policy, env, learning_rate=rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
                policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
 
@@ -71,6 +73,12 @@ def _check_init_model(cfg: TrainConfig) -> None:
     if out in (path.resolve().parent, path.resolve().parent.parent):
         raise InitModelError(f"TrainConfig.init_model: {path} belongs to the output folder {cfg.out}; "
                              "a continued run needs an out of its own")
+    saved = saved_config_path(path)
+    flat = saved is not None and bool(json.loads(saved.read_text()).get("flat_observation", False))
+    if flat != cfg.flat_observation:
+        raise InitModelError(f"TrainConfig.init_model: {path} was trained on "
+                             f"{'flattened' if flat else 'dict'} observations; set flat_observation={flat} "
+                             f"({'with' if flat else 'without'} --flat-observation) to start from it")
     stats = observation_stats_path(path)
     if cfg.normalize and stats is None:
         raise InitModelError(f"TrainConfig.init_model: no observation statistics saved with {path} "
@@ -160,7 +168,7 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(
         {**asdict(cfg), "env_options": env_options(cfg.posture_target)}, indent=2))
-    env = vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"))
+    env = vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"), cfg.vec_env)
     if cfg.normalize:
         env = normalized(env, training=True)
     eval_env = None

@@ -18,6 +18,7 @@ from sms3d_env.training import (
     train_policy,
 )
 from sms3d_env.training import config as training_config
+from sms3d_env.training.rl import InitModelError
 
 FAST = dict(num_mushrooms=8, max_episode_steps=40, eval_freq=128, eval_episodes=1,
             checkpoint_freq=128, verbose=0, net_arch=(32, 32))
@@ -110,6 +111,8 @@ def test_sac_short_run(tmp_path):
     ({"residual_approach_only": True}, "residual_approach_only"),  # no residual
     ({"residual_scale": 0.5, "residual_approach_only": True, "residual_until_held": True}, "residual_approach_only"),
     ({"reward_type": "sparse", "reward_pose": "truth"}, "reward_pose"),  # nothing to shape
+    ({"vec_env": "threads"}, "vec_env"),
+    ({"flat_observation": 1}, "flat_observation"),
 ])
 def test_invalid_config_names_field(kw, field):
     with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
@@ -233,7 +236,7 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
                                   ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
                                   ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"],
                                   ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"],
-                                  ["--residual-approach-only"]],
+                                  ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
@@ -365,3 +368,49 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     with pytest.raises(ValueError, match="init_model"):
         TrainConfig(algo="sac", init_model=str(checkpoint))
 
+
+
+def test_a_flat_observation_run_in_the_training_process_is_rebuilt_flat(tmp_path):
+    """``vec_env="dummy"`` + ``flat_observation``: two envs in this process, an MlpPolicy on the
+    flattened observation (the same numbers as the dict's, in gymnasium's flatten order), rebuilt
+    flat by ``PolicyActor`` and evaluated like any policy."""
+    import gymnasium as gym
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    import generator
+    from sms3d_env.training.actor import PolicyActor
+    from sms3d_env.training.envs import make_env, vec_env
+
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", n_envs=2, vec_env="dummy", flat_observation=True,
+                      normalize=True, total_steps=256, n_steps=64, batch_size=64, out=str(tmp_path),
+                      **{**FAST, "checkpoint_freq": 0})
+    venv = vec_env(cfg.env_kwargs(), 2, 0, None, cfg.vec_env)
+    try:
+        assert isinstance(venv, DummyVecEnv) and venv.num_envs == 2
+    finally:
+        venv.close()
+    train_policy(cfg)
+    model = load_model(tmp_path / "model.zip")
+    assert type(model.policy).__name__ == "ActorCriticPolicy"  # MlpPolicy, not MultiInputActorCriticPolicy
+    actor = PolicyActor(tmp_path / "model.zip")
+    bed = {"scene_config": generator.SceneConfig().replace(placement__num_mushrooms=8)}
+    env, plain = actor.make_env(**bed), make_env("SMS3DPickTrain-v0", **bed)
+    try:
+        flat, _ = env.reset(seed=3)
+        as_dict, _ = plain.reset(seed=3)
+        assert flat.shape == model.observation_space.shape
+        np.testing.assert_array_equal(flat, gym.spaces.flatten(plain.observation_space, as_dict))
+        action = actor(flat)
+        assert action.shape == (7,) and np.all(np.abs(action) <= 1.0)
+    finally:
+        env.close()
+        plain.close()
+    _check_eval(tmp_path / "model.zip")
+
+
+def test_a_run_cannot_start_from_a_model_of_the_other_observation_layout(ppo_run, tmp_path):
+    out, _ = ppo_run  # dict observations
+    cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, flat_observation=True,
+                      init_model=str(out / "model.zip"), out=str(tmp_path), **FAST)
+    with pytest.raises(InitModelError, match="dict observations.*flat_observation=False"):
+        train_policy(cfg)
