@@ -20,7 +20,11 @@ RULES = ("tallest", "largest", "index", "random")
 
 
 class Reachability:
-    """IK feasibility on the arm-only model (a few ms per query)."""
+    """IK feasibility on the arm-only model (a few ms per query; a repeated query is answered from
+    a cache of the ``cache_size`` most recently used solves: a bed pool asks the same ones at each
+    of its beds' resets)."""
+
+    cache_size = 8192
 
     def __init__(self, model: mujoco.MjModel, arm_qadr: np.ndarray, home: np.ndarray) -> None:
         self.model, self.data = model, mujoco.MjData(model)
@@ -34,6 +38,7 @@ class Reachability:
             if model.jnt_limited[j]:
                 lo[k], hi[k] = model.jnt_range[j] + np.array([1e-3, -1e-3])
         self.lo, self.hi, self.home = lo, hi, np.clip(home, lo + 1e-6, hi - 1e-6)
+        self._solved: dict[tuple[bytes, bytes, tuple[float, ...]], np.ndarray | None] = {}
 
     def _res(self, q: np.ndarray, pos: np.ndarray, z: np.ndarray) -> np.ndarray:
         self.data.qpos[self.qadr] = q
@@ -44,12 +49,25 @@ class Reachability:
     def solve(self, cap_top: np.ndarray, axis: np.ndarray, offsets: tuple[float, ...] = (0.05, 0.0)
               ) -> np.ndarray | None:
         """Joint angles with the cup on the stem axis ``offsets[-1]`` above the cap top, facing
-        down the axis, solved from home through the earlier offsets; None if one fails."""
-        z = -np.asarray(axis) / np.linalg.norm(axis)
+        down the axis, solved from home through the earlier offsets; None if one fails. The solve
+        is deterministic, so a cached answer is the answer."""
+        cap_top, axis = np.asarray(cap_top, np.float64), np.asarray(axis, np.float64)
+        key = (cap_top.tobytes(), axis.tobytes(), tuple(float(o) for o in offsets))
+        if key in self._solved:
+            q = self._solved.pop(key)  # re-inserted below as the most recently used
+        else:
+            q = self._solve(cap_top, axis, offsets)
+            if len(self._solved) >= self.cache_size:
+                del self._solved[next(iter(self._solved))]  # the least recently used
+        self._solved[key] = q
+        return None if q is None else q.copy()
+
+    def _solve(self, cap_top: np.ndarray, axis: np.ndarray, offsets: tuple[float, ...]) -> np.ndarray | None:
+        z = -axis / np.linalg.norm(axis)
         q = self.home
         for offset in offsets:
             sol = least_squares(self._res, q, bounds=(self.lo, self.hi), max_nfev=100,
-                                args=(np.asarray(cap_top) - z * offset, z))
+                                args=(cap_top - z * offset, z))
             if sol.cost > 1e-6:
                 return None
             q = np.clip(sol.x, self.lo + 1e-6, self.hi - 1e-6)

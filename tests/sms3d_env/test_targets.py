@@ -1,0 +1,76 @@
+"""Reachability's solve cache: the same answers as solving afresh, and episodes unchanged by it."""
+
+import gymnasium as gym
+import numpy as np
+
+import generator
+import sms3d_env  # noqa: F401  (registers the env ids)
+from sms3d_env import ScriptedPicker
+
+SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
+
+
+def _reach_and_targets():
+    env = gym.make("SMS3DPick-v0", scene_config=SMALL)
+    env.reset(seed=0)
+    u = env.unwrapped
+    return env, u.reach, [(np.asarray(i.cap_top), np.asarray(i.rotation)[:, 2]) for i in u.scene.instances]
+
+
+def test_a_cached_solve_is_the_fresh_solve_and_a_copy():
+    env, reach, targets = _reach_and_targets()
+    try:
+        for cap_top, axis in targets[:4]:
+            first = reach.solve(cap_top, axis, (0.05, 0.03))
+            fresh = reach._solve(cap_top, axis, (0.05, 0.03))
+            assert (first is None) == (fresh is None)
+            if first is not None:
+                np.testing.assert_array_equal(first, fresh)
+                first[:] = 99.0  # a caller's change does not reach the cache
+                np.testing.assert_array_equal(reach.solve(cap_top, axis, (0.05, 0.03)), fresh)
+    finally:
+        env.close()
+
+
+def test_the_cache_keeps_the_most_recently_used_solves():
+    env, reach, targets = _reach_and_targets()
+    try:
+        reach._solved.clear()
+        reach.cache_size = 2
+        (a, ax), (b, bx), (c, cx) = targets[:3]
+        reach.solve(a, ax)
+        reach.solve(b, bx)
+        reach.solve(a, ax)  # a is now the most recently used
+        reach.solve(c, cx)  # evicts b
+        kept = {k[0] for k in reach._solved}
+        assert len(reach._solved) == 2 and kept == {a.tobytes(), c.tobytes()}
+    finally:
+        env.close()
+
+
+def test_pool_episodes_are_the_same_with_and_without_the_cache():
+    """A bed pool asks the same reachability and posture solves at every reset of a bed: answered
+    from the cache, every observation and reward equals a run whose cache is emptied each reset."""
+    runs = []
+    for keep in (True, False):
+        env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL, scene_pool=2, pregrasp_start=0.5)
+        picker = ScriptedPicker.for_env(env)
+        trace = []
+        try:
+            for episode in range(5):
+                if not keep:
+                    env.unwrapped.reach._solved.clear()
+                obs, _ = env.reset(seed=episode % 2 if episode else 0)
+                picker.reset()
+                for _ in range(40):
+                    obs, reward, terminated, truncated, _ = env.step(picker(obs))
+                    trace.append((np.concatenate([np.ravel(v) for v in obs.values()]), reward))
+                    if terminated or truncated:
+                        break
+        finally:
+            env.close()
+        runs.append(trace)
+    assert len(runs[0]) == len(runs[1])
+    for (o1, r1), (o2, r2) in zip(*runs, strict=True):
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2
