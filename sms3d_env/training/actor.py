@@ -95,7 +95,11 @@ class PolicyActor:
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
         self.residual_until_held = bool(self.saved.get("residual_until_held", False))
         self.residual_approach_only = bool(self.saved.get("residual_approach_only", False))
-        self.flat_observation = bool(self.saved.get("flat_observation", False))
+        # A policy trained on the flattened observation: the keys in their concatenation order.
+        self.observation_keys: list[str] | None = self.saved.get("observation_keys")
+        if self.saved.get("flat_observation") and self.observation_keys is None:
+            raise ValueError(f"{cfg_file}: flat_observation is set but observation_keys (the flattening "
+                             "order) is missing; retrain, or add the keys of the env's observation space")
         self.model = load_model(path, algo)
         self.obs_stats = None
         stats = observation_stats_path(path)
@@ -107,14 +111,17 @@ class PolicyActor:
 
     def make_env(self, **kwargs: Any) -> Any:
         """The env this policy runs in: its env id and options, inside the residual wrapper it
-        was trained in (if any) and flattened if it was trained so, with ``kwargs`` (bed size,
-        pose source, ...) for the rest."""
+        was trained in (if any), with ``kwargs`` (bed size, pose source, ...) for the rest. Its
+        observation is the dict one even for a policy trained on the flattened observation
+        (``__call__`` flattens it)."""
         from sms3d_env.training.envs import make_env
 
         return make_env(self.env_id, self.residual_scale, self.residual_until_held, self.residual_approach_only,
-                        self.flat_observation, **{**kwargs, **self.env_options})
+                        **{**kwargs, **self.env_options})
 
-    def __call__(self, obs: dict[str, np.ndarray] | np.ndarray) -> np.ndarray:
+    def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        if self.observation_keys is not None:  # as gymnasium's FlattenObservation did in training
+            obs = np.concatenate([np.ravel(obs[k]) for k in self.observation_keys])
         if self.obs_stats is not None:
             obs = self.obs_stats.normalize_obs(obs)
         action, _ = self.model.predict(obs, deterministic=self.deterministic)

@@ -137,6 +137,18 @@ def _wall_clock_callback(max_wall_s: float) -> Any:
     return _StopAfter()
 
 
+def _observation_keys(cfg: TrainConfig) -> list[str]:
+    """The observation's keys in the order ``FlattenObservation`` concatenates them (saved so that
+    ``PolicyActor`` flattens a dict observation the same way)."""
+    from sms3d_env.training.envs import make_env
+
+    env = make_env(**{**cfg.env_kwargs(), "flat_observation": False})
+    try:
+        return list(env.observation_space.spaces)
+    finally:
+        env.close()
+
+
 def train_policy(cfg: TrainConfig) -> dict[str, Any]:
     """Train, log and save a policy; returns a summary (also written to ``out/summary.json``).
 
@@ -166,8 +178,10 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
         _check_init_model(cfg)
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps(
-        {**asdict(cfg), "env_options": env_options(cfg.posture_target)}, indent=2))
+    saved = {**asdict(cfg), "env_options": env_options(cfg.posture_target)}
+    if cfg.flat_observation:
+        saved["observation_keys"] = _observation_keys(cfg)
+    (out / "config.json").write_text(json.dumps(saved, indent=2))
     env = vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"), cfg.vec_env)
     if cfg.normalize:
         env = normalized(env, training=True)

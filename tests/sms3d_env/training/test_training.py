@@ -370,10 +370,10 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
 
 
 
-def test_a_flat_observation_run_in_the_training_process_is_rebuilt_flat(tmp_path):
+def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observations(tmp_path):
     """``vec_env="dummy"`` + ``flat_observation``: two envs in this process, an MlpPolicy on the
-    flattened observation (the same numbers as the dict's, in gymnasium's flatten order), rebuilt
-    flat by ``PolicyActor`` and evaluated like any policy."""
+    flattened observation; ``PolicyActor`` builds the usual dict-observation env and flattens
+    each observation as training did (gymnasium's order, saved as ``observation_keys``)."""
     import gymnasium as gym
     from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -394,17 +394,18 @@ def test_a_flat_observation_run_in_the_training_process_is_rebuilt_flat(tmp_path
     assert type(model.policy).__name__ == "ActorCriticPolicy"  # MlpPolicy, not MultiInputActorCriticPolicy
     actor = PolicyActor(tmp_path / "model.zip")
     bed = {"scene_config": generator.SceneConfig().replace(placement__num_mushrooms=8)}
-    env, plain = actor.make_env(**bed), make_env("SMS3DPickTrain-v0", **bed)
+    env, flat_env = actor.make_env(**bed), make_env("SMS3DPickTrain-v0", flat_observation=True, **bed)
     try:
-        flat, _ = env.reset(seed=3)
-        as_dict, _ = plain.reset(seed=3)
-        assert flat.shape == model.observation_space.shape
-        np.testing.assert_array_equal(flat, gym.spaces.flatten(plain.observation_space, as_dict))
-        action = actor(flat)
-        assert action.shape == (7,) and np.all(np.abs(action) <= 1.0)
+        obs, _ = env.reset(seed=3)
+        flat, _ = flat_env.reset(seed=3)
+        assert isinstance(obs, dict) and flat.shape == model.observation_space.shape
+        stats = actor.obs_stats
+        np.testing.assert_array_equal(flat, gym.spaces.flatten(env.observation_space, obs))
+        expected, _ = model.predict(stats.normalize_obs(flat), deterministic=True)
+        np.testing.assert_array_equal(actor(obs), expected)
     finally:
         env.close()
-        plain.close()
+        flat_env.close()
     _check_eval(tmp_path / "model.zip")
 
 
