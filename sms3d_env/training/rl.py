@@ -2,7 +2,7 @@
 learnable options of ``SMS3DPickTrain-v0``.
 
 ``train_policy(TrainConfig(...))`` trains with vectorised envs (``SubprocVecEnv`` for
-``n_envs > 1``), evaluates periodically (``eval/success_rate`` from the env's ``is_success``),
+``n_envs > 1``, or all in this process with ``vec_env="dummy"``), evaluates periodically (``eval/success_rate`` from the env's ``is_success``),
 writes CSV (and TensorBoard, if installed) logs, checkpoints and ``model.zip`` plus
 ``config.json`` and ``summary.json`` into ``out``; ``flat_observation`` trains an ``MlpPolicy`` on
 the flattened observation; ``normalize=True`` standardises observations
