@@ -34,6 +34,7 @@ import numpy as np  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 import generator  # noqa: E402
+from sms3d_env.pickers.episode import run_episode  # noqa: E402
 from sms3d_env.pickers.registry import PickerSpec, make_picker_env  # noqa: E402
 from sms3d_env.pickers.scripted import ScriptedPicker  # noqa: E402
 from sms3d_env.study.report import mcnemar_p, wilson_interval  # noqa: E402
@@ -69,6 +70,21 @@ class StallEscapingPicker(ScriptedPicker):
         return super()._approach(o)
 
 
+class TruthInPhases:
+    """``picker`` acting on the true target pose while in one of ``phases`` (a run_episode policy)."""
+
+    def __init__(self, env, picker: ScriptedPicker, phases: frozenset[str]) -> None:  # noqa: ANN001
+        self.env, self.picker, self.phases = env, picker, phases
+
+    def reset(self) -> None:
+        self.picker.reset()
+
+    def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        if self.picker.phase in self.phases:
+            obs = with_true_target(self.env, obs, self.env.unwrapped.picking.state.target)
+        return self.picker(obs)
+
+
 def run(error: float, truth_phases: frozenset[str], escape: bool, beds: int, episodes: int,
         seed: int) -> list[tuple[int, bool, str]]:
     """``(seed, success, failure cause)`` per episode whose target is reachable."""
@@ -78,21 +94,12 @@ def run(error: float, truth_phases: frozenset[str], escape: bool, beds: int, epi
     if escape:
         u = env.unwrapped
         picker = StallEscapingPicker(u.ctrl_cfg.max_linear_speed, u.ctrl_cfg.max_angular_speed, u.control_dt)
-    rows = []
+    policy = TruthInPhases(env, picker, truth_phases)
     try:
-        for s in range(seed, seed + episodes):
-            obs, info = env.reset(seed=s)
-            picker.reset()
-            target = int(info["target"])
-            terminated = truncated = False
-            while not (terminated or truncated):
-                seen = with_true_target(env, obs, target) if picker.phase in truth_phases else obs
-                obs, _, terminated, truncated, info = env.step(picker(seen))
-            if info["reachable"]:
-                rows.append((s, bool(info["is_success"]), info["failure_cause"]))
+        results = [run_episode(env, policy, s) for s in range(seed, seed + episodes)]
     finally:
         env.close()
-    return rows
+    return [(r["seed"], r["success"], r["failure_cause"]) for r in results if r["reachable"]]
 
 
 def main() -> None:

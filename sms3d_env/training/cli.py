@@ -137,7 +137,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--n-envs", type=int, default=defaults.n_envs, help="parallel envs (see --vec-env)")
     p.add_argument("--vec-env", choices=VEC_ENVS, default=defaults.vec_env,
                    help="rl/residual: subproc (default): one worker process per env; dummy: all envs in the "
-                        "training process (faster on 2 cores: no pipe round trip per step)")
+                        "training process (no pipe round trip per step; leaves a core free)")
     p.add_argument("--flat-observation", action="store_true",
                    help="rl/residual: flatten the dict observation into one vector and train an MlpPolicy on it "
                         "(the same inputs; less per-step overhead than MultiInputPolicy)")

@@ -33,14 +33,14 @@ class TrainConfig:
         n_envs: parallel envs, stepped as ``vec_env`` says.
         vec_env: ``"subproc"`` (default): one worker process per env when ``n_envs`` > 1
             (SB3's ``SubprocVecEnv``); ``"dummy"``: every env in the training process, one after
-            another (``DummyVecEnv``). On 2 cores ``"dummy"`` ran faster: a pipe round trip to a
-            worker cost about as much as the env step it carried (benchmarks/RESULTS.md,
-            "Session 19"), and the second core stays free.
+            another (``DummyVecEnv``). On 2 cores ``"dummy"`` ran ≈ 6 % faster and leaves the
+            second core free (benchmarks/RESULTS.md, "Session 19").
         flat_observation: the dict observation flattened into one vector (gymnasium's
             ``FlattenObservation``, outermost) and SB3's ``MlpPolicy`` on it instead of
             ``MultiInputPolicy``: the same inputs and network, one normalisation and one tensor
-            per step instead of one per observation key. Saved in ``config.json``;
-            ``PolicyActor`` rebuilds the flattened env.
+            per step instead of one per observation key (×1.4 steps/s here). Saved in
+            ``config.json`` with the flattening order (``observation_keys``); ``PolicyActor``
+            flattens dict observations so.
         pose_source, pose_error_deg, position_noise: the target pose estimate used in training.
         env_id: ``"SMS3DPick-v0"`` (its options as given here) or ``"SMS3DPickTrain-v0"`` (the
             learnable options: latched suction, staged reward, dead-end episode end, task
