@@ -49,9 +49,10 @@ def compute_reward(s: RewardState, reward_type: str) -> float:
 
     Dense: -distance to the goal cap top (m) + 0.1 x alignment of the cup axis with the goal
     stem axis (the estimated pose unless the env's ``reward_pose="truth"``) + 0.5 sealed on the
-    target + 1 detached *and held* + 2 x lift fraction while held + 5 success - 2 bruise. The detach and lift terms pay only while the cup holds the
-    target: paid for detachment alone, PPO learned to knock targets off their roots and collect
-    the bonus every step without ever holding one.
+    target + 1 detached *and held* + 2 x lift fraction while held + 5 success - 2 bruise. The
+    detach and lift terms pay only while the cup holds the target: paid for detachment alone,
+    PPO learned to knock targets off their roots and collect the bonus every step without ever
+    holding one.
 
     Staged: see ``reward_terms``; the sum of its terms.
     """
