@@ -73,24 +73,24 @@ def _scene_samples(args: argparse.Namespace, split: str, seed: int) -> list:
     from perception.pose.data import samples_from_detections, samples_from_scenes
 
     if args.masks == "oracle":
-        if args.edge_tolerance_mm:
-            raise PerceptionConfigError("--edge-tolerance-mm", "trims a detector's masks; needs --masks shipped or a checkpoint")
+        for flag, given in (("--edge-tolerance-mm", args.edge_tolerance_mm),
+                            ("--depth-smoothing-px", args.depth_smoothing_px)):
+            if given:
+                raise PerceptionConfigError(flag, "cuts a detector's clouds; needs --masks shipped or a checkpoint")
         return [s for root in args.scenes for s in samples_from_scenes(root, split, cap_only=args.cap_only, seed=seed)]
     if args.cap_only:
         raise PerceptionConfigError("--cap-only", "needs --masks oracle (detectors find whole mushrooms)")
     from perception.detection.load import load_detector
+    from perception.pipeline import PosePipeline
 
     detector = load_detector(args.masks)
-    trim = None
-    if args.edge_tolerance_mm > 0:
-        from perception.pipeline import within_depth_of_core
-
-        def trim(mask, depth):
-            return within_depth_of_core(mask, depth, args.edge_tolerance_mm / 1000.0)
-
+    # The pipeline's own cut, without a network: the clouds are taken as it will take them.
+    cut = PosePipeline(None, detector=None,  # type: ignore[arg-type]
+                       edge_tolerance_m=args.edge_tolerance_mm / 1000.0 if args.edge_tolerance_mm > 0 else None,
+                       depth_smoothing_px=args.depth_smoothing_px)
     return [s for root in args.scenes
             for s in samples_from_detections(root, split, detector, seed=seed, progress=not args.quiet,
-                                             trim_mask=trim)]
+                                             cloud_pixels=cut.cloud_pixels)]
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -101,7 +101,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     torch.set_num_threads(args.threads)
     try:
-        net = PoseNetConfig(backbone=args.backbone, head=args.head, use_rgb=args.rgb, num_points=args.num_points)
+        net = PoseNetConfig(backbone=args.backbone, head=args.head, use_rgb=args.rgb, num_points=args.num_points,
+                            depth_smoothing_px=args.depth_smoothing_px)
         cfg = TrainConfig(
             epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, loss=args.loss, seed=args.seed,
             device=args.device, plateau_patience=args.patience, progress=not args.quiet,
@@ -112,7 +113,8 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     cache = Path(args.cache) if args.cache else None
-    for flag, given in (("--add-synthetic", args.add_synthetic), ("--edge-tolerance-mm", args.edge_tolerance_mm)):
+    for flag, given in (("--add-synthetic", args.add_synthetic), ("--edge-tolerance-mm", args.edge_tolerance_mm),
+                        ("--depth-smoothing-px", args.depth_smoothing_px)):
         if given and not args.scenes:
             print(f"error: {flag} needs --scenes", file=sys.stderr)
             return 2
@@ -202,6 +204,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--edge-tolerance-mm", type=millimetres, default=0.0,
                    help="with a detector's --masks: cut each mask as `eval-pipeline --edge-tolerance-mm` does "
                         "(border pixels this much deeper than the interior dropped; default 0: whole masks)")
+    p.add_argument("--depth-smoothing-px", type=float, default=net.depth_smoothing_px, metavar="SIGMA",
+                   help="with a detector's --masks: smooth each mask's depth with a Gaussian of SIGMA pixels before "
+                        "taking its points; saved with the network, so the pipeline feeds it the same way "
+                        "(default 0: raw depth)")
     p.add_argument("--cap-only", action="store_true", help="with --scenes and oracle masks: cap points only")
     p.add_argument("--cache", help="folder to cache rendered views as .npz")
     p.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this wall time")
@@ -211,7 +217,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--device", default="cpu")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
-    p.add_argument("--init", help="start from this checkpoint's weights (fine-tune; same network config)")
+    p.add_argument("--init", help="start from this checkpoint's weights (fine-tune; same network shape)")
     p.add_argument(
         "--init-backbone", metavar="CHECKPOINT",
         help="start from this checkpoint's backbone and hidden head layer; a fresh output layer (e.g. another --head)",

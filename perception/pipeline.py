@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from generator.camera import Intrinsics
+from perception.depth_smoothing import smooth_depth_in_mask
 from perception.detection.detector import Detection, Detector
 from perception.errors import NoEstimate, PipelineInputError
 from perception.pointcloud import (
@@ -151,15 +152,21 @@ class PosePipeline:
     default. ``erode_px`` trims mask borders; it
     is 0 by default because the shipped network was fine-tuned on un-eroded masks (1 px of erosion
     raised its error with exact masks from 9.2° to 12.5°).
+
+    ``depth_smoothing_px`` smooths each mask's depth before its points are taken
+    (:func:`~perception.depth_smoothing.smooth_depth_in_mask`); ``None``, the default, takes it
+    from the network (``estimator.config.depth_smoothing_px``): a network is fed as it was trained.
     """
 
     def __init__(self, estimator: PoseEstimator, detector: Detector | str | None = "shipped", erode_px: int = 0,
-                 soil_margin_m: float | None = None, edge_tolerance_m: float | None = None) -> None:
+                 soil_margin_m: float | None = None, edge_tolerance_m: float | None = None,
+                 depth_smoothing_px: float | None = None) -> None:
         self.estimator = estimator
         self._detector = detector
         self.erode_px = erode_px
         self.soil_margin_m = soil_margin_m
         self.edge_tolerance_m = edge_tolerance_m
+        self.depth_smoothing_px = depth_smoothing_px
 
     def trim_mask(self, mask: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """A detection's mask as the pose cloud is cut from it: eroded by ``erode_px``, then
@@ -172,6 +179,15 @@ class PosePipeline:
         if self.edge_tolerance_m is not None:
             mask = within_depth_of_core(mask, depth, self.edge_tolerance_m)
         return mask
+
+    def cloud_pixels(self, mask: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The mask and depth a detection's pose cloud is taken from: ``trim_mask``'s mask, and
+        the depth smoothed inside it (``depth_smoothing_px``)."""
+        mask = self.trim_mask(mask, depth)
+        sigma = self.depth_smoothing_px
+        if sigma is None:
+            sigma = self.estimator.config.depth_smoothing_px
+        return mask, (smooth_depth_in_mask(depth, mask, sigma) if sigma > 0 else depth)
 
     @property
     def detector(self) -> Detector | None:
@@ -196,7 +212,8 @@ class PosePipeline:
         world_from_camera = np.asarray(world_from_camera, dtype=float)
         clouds, colours, kept = [], [], []
         for det in detections:
-            points, colors = depth_to_points(depth, intrinsics, self.trim_mask(det.mask, depth), rgb)
+            mask, cloud_depth = self.cloud_pixels(det.mask, depth)
+            points, colors = depth_to_points(cloud_depth, intrinsics, mask, rgb)
             try:
                 check_cloud(points, self.estimator.min_points)
             except NoEstimate:

@@ -24,13 +24,24 @@ def _cuda_available() -> bool:
 
 @dataclass(frozen=True)
 class PoseNetConfig:
-    """Shape of a :class:`PoseNet`; validated on construction."""
+    """Shape of a :class:`PoseNet` and what it is fed; validated on construction.
+
+    ``depth_smoothing_px``: the network reads clouds whose depth was smoothed inside each mask
+    with a Gaussian of this many pixels (:func:`perception.depth_smoothing.smooth_depth_in_mask`)
+    before back-projection; ``PosePipeline`` does the same for it. 0 (the default, and every
+    checkpoint saved before the field existed): raw depth. It shapes no weight, so fine-tuning
+    (``init``) may change it.
+    """
 
     backbone: str = "point_transformer"
     head: Head = "6d"
     use_rgb: bool = False
     num_points: int = 1024
     hidden: int = 128  # width of the head MLP
+    depth_smoothing_px: float = 0.0
+
+    #: Fields that describe the network's input rather than its weights.
+    INPUT_FIELDS = ("depth_smoothing_px",)
 
     def __post_init__(self) -> None:
         if self.backbone not in BACKBONE_NAMES:
@@ -43,6 +54,9 @@ class PoseNetConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise PerceptionConfigError(name, f"must be an int >= {lo}, got {v!r}")
+        s = self.depth_smoothing_px
+        if isinstance(s, bool) or not isinstance(s, (int, float)) or not np.isfinite(s) or not 0 <= s <= 20:
+            raise PerceptionConfigError("depth_smoothing_px", f"must be a number in [0, 20] (pixels), got {s!r}")
 
     @property
     def in_channels(self) -> int:

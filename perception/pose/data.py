@@ -172,7 +172,7 @@ def samples_from_scenes(
 def samples_from_detections(
     root: str | Path, split: str | None, detector: Any, num_points: int = 2048, seed: int = 0,
     min_iou: float = 0.5, progress: bool = False,
-    trim_mask: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    cloud_pixels: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> list[PointCloudSample]:
     """Per-instance samples cut out by a stage-1 ``detector``'s masks instead of the renderer's.
 
@@ -181,8 +181,9 @@ def samples_from_detections(
     depth pixels become the sample's points, labelled with that mushroom's rotation. So the pose
     network learns from the masks it will be given: their soil pixels at the borders, their
     missing bits, the camera's noise. Unmatched detections and mushrooms are left out.
-    ``trim_mask(mask, depth)`` (e.g. ``PosePipeline.trim_mask``) cuts each matched mask as the
-    pipeline will cut it before its points are taken; matching uses the whole mask.
+    ``cloud_pixels(mask, depth) -> (mask, depth)`` (e.g. ``PosePipeline.cloud_pixels``) trims each
+    matched mask and smooths its depth as the pipeline will before its points are taken;
+    matching uses the whole mask.
     """
     from generator.dataset.readers import instance_in_camera, read_scene_files, scene_indices
     from generator.dataset.writer import scene_dirname
@@ -214,8 +215,8 @@ def samples_from_detections(
             if best is None:
                 continue
             taken.add(best)
-            mask = det.mask if trim_mask is None else trim_mask(det.mask, s.depth)
-            points, _ = depth_to_points(s.depth, s.intrinsics, mask)
+            mask, depth = (det.mask, s.depth) if cloud_pixels is None else cloud_pixels(det.mask, s.depth)
+            points, _ = depth_to_points(depth, s.intrinsics, mask)
             if len(points) < MIN_POINTS:
                 continue
             rng = np.random.default_rng(np.random.SeedSequence([seed, index, best]))

@@ -109,6 +109,21 @@ def load_checkpoint(
     return model.to(map_location).eval(), payload.get("extra", {})
 
 
+def load_weights(model: PoseNet, path: str | Path) -> None:
+    """Copy every weight stored at ``path`` into ``model`` (fine-tuning). The stored network
+    must have ``model``'s shape (every :class:`PoseNetConfig` field but its input fields, e.g.
+    ``depth_smoothing_px``, which a fine-tuning run may change), else
+    :class:`CheckpointMismatchError`."""
+    payload = read_checkpoint(path)
+    stored = PoseNetConfig.from_dict(payload["config"])
+    shape = [f.name for f in dataclasses.fields(PoseNetConfig) if f.name not in PoseNetConfig.INPUT_FIELDS]
+    _check_fields(path, stored, model.config, shape)
+    try:
+        model.load_state_dict(payload["state_dict"])
+    except RuntimeError as exc:
+        raise CheckpointFormatError(f"{path}: weights do not fit config {stored} ({exc})") from exc
+
+
 #: Parameters of the rotation head's output layer, the only ones that depend on the head type.
 _OUTPUT_LAYER = ("head.2.weight", "head.2.bias")
 

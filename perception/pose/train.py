@@ -28,6 +28,7 @@ from perception.pose.pose_net import (
     PoseNetConfig,
     load_backbone,
     load_checkpoint,
+    load_weights,
     save_checkpoint,
 )
 from perception.pose.rotations import rotation_loss
@@ -89,7 +90,8 @@ def train(
     ``train_config.json`` in ``out_dir``.
 
     With ``init``, training starts from the weights of that checkpoint (fine-tuning; its network
-    config must equal ``net_config``, else :class:`CheckpointMismatchError`); a resumed run
+    must have ``net_config``'s shape, else :class:`CheckpointMismatchError`, while its input
+    fields such as ``depth_smoothing_px`` may differ: the saved network has ``net_config``'s); a resumed run
     ignores it. With ``init_backbone``, only that checkpoint's backbone and hidden head layer are
     loaded (:func:`~perception.pose.pose_net.load_backbone`): the way to change the rotation head.
     """
@@ -99,7 +101,7 @@ def train(
     device = torch.device(cfg.device)
     model = PoseNet(net_config).to(device)
     if init is not None:
-        model, _ = load_checkpoint(init, net_config, map_location=device)
+        load_weights(model, init)
     if init_backbone is not None:
         load_backbone(model, init_backbone)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)

@@ -6,6 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from generator.camera import project
+from perception.depth_smoothing import smooth_depth_in_mask
 from perception.detection.detector import Detection, detections_from_labels
 from perception.errors import PerceptionConfigError
 from perception.evaluation.eval_pipeline import GroundTruthMushroom, match
@@ -17,7 +18,7 @@ from perception.pipeline import (
     estimate_cap_top,
     within_depth_of_core,
 )
-from perception.pointcloud import MIN_POINTS
+from perception.pointcloud import MIN_POINTS, depth_to_points
 from perception.pose.estimator import PoseEstimator
 from perception.pose.pose_net import PoseNet, PoseNetConfig
 
@@ -177,6 +178,29 @@ def test_the_pipeline_cuts_its_clouds_from_the_trimmed_masks():
     assert np.array_equal(whole.trim_mask(spilled, depth), spilled)
     trimmed = PosePipeline(None, detector=None, edge_tolerance_m=0.008)  # type: ignore[arg-type]
     assert np.array_equal(trimmed.trim_mask(spilled, depth), cap)
+
+
+def test_a_network_trained_on_smoothed_depth_is_fed_smoothed_depth(frame_and_scene, monkeypatch):
+    frame, _ = frame_and_scene
+    net = PoseNet(PoseNetConfig(backbone="pointnet", num_points=128, hidden=16, depth_smoothing_px=3.0))
+    pipeline = PosePipeline(PoseEstimator(net), detector=None)
+    detections = detections_from_labels(frame.labels_mushroom)
+    seen = []
+    estimate_batch = pipeline.estimator.estimate_batch
+    monkeypatch.setattr(pipeline.estimator, "estimate_batch", lambda clouds, colours: seen.extend(clouds)
+                        or estimate_batch(clouds, colours))
+    estimates = pipeline(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, detections)
+    assert len(seen) == len(estimates) > 3
+    for est, cloud in zip(estimates, seen, strict=True):
+        mask = est.detection.mask
+        smoothed, _ = depth_to_points(smooth_depth_in_mask(frame.depth, mask, 3.0), frame.intrinsics, mask)
+        raw, _ = depth_to_points(frame.depth, frame.intrinsics, mask)
+        assert np.allclose(cloud, smoothed, atol=1e-6)
+        assert len(raw) == len(cloud) and not np.allclose(cloud, raw, atol=1e-6)
+    # An explicit 0 overrides the network's setting.
+    raw_pipeline = PosePipeline(PoseEstimator(net), detector=None, depth_smoothing_px=0.0)
+    mask = detections[0].mask
+    assert raw_pipeline.cloud_pixels(mask, frame.depth)[1] is frame.depth
 
 
 @settings(max_examples=30, deadline=None)

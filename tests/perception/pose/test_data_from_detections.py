@@ -35,7 +35,7 @@ def test_trimmed_training_clouds_lose_the_soil_their_masks_spilled_onto(small_da
     detector.labels = scene.labels_mushroom
     whole = samples_from_detections(root, "train", detector, num_points=256)
     trimmed = samples_from_detections(root, "train", detector, num_points=256,
-                                      trim_mask=lambda m, d: within_depth_of_core(m, d, 0.008))
+                                      cloud_pixels=lambda m, d: (within_depth_of_core(m, d, 0.008), d))
     assert len(whole) == len(trimmed) >= 3
     spilled = kept = 0
     for w, t in zip(whole, trimmed, strict=True):

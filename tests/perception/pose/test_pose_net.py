@@ -13,6 +13,7 @@ from perception.pose.pose_net import (
     PoseNetConfig,
     load_backbone,
     load_checkpoint,
+    load_weights,
     save_checkpoint,
 )
 
@@ -52,7 +53,9 @@ def test_point_transformer_gradients_flow() -> None:
 
 @pytest.mark.parametrize(
     ("kwargs", "field"),
-    [({"backbone": "resnet"}, "backbone"), ({"head": "7d"}, "head"), ({"num_points": 8}, "num_points"), ({"use_rgb": 1}, "use_rgb")],
+    [({"backbone": "resnet"}, "backbone"), ({"head": "7d"}, "head"), ({"num_points": 8}, "num_points"), ({"use_rgb": 1}, "use_rgb"),
+     ({"depth_smoothing_px": -1.0}, "depth_smoothing_px"), ({"depth_smoothing_px": float("nan")}, "depth_smoothing_px"),
+     ({"depth_smoothing_px": 25}, "depth_smoothing_px"), ({"depth_smoothing_px": True}, "depth_smoothing_px")],
 )
 def test_config_errors_name_the_field(kwargs: dict, field: str) -> None:
     with pytest.raises(PerceptionConfigError) as info:
@@ -75,6 +78,30 @@ def test_checkpoint_round_trip_and_mismatch(tmp_path) -> None:
     assert set(info.value.mismatches) == {"head"}
     assert "head" in str(info.value) and "'quat'" in str(info.value)
     assert not list(tmp_path.glob("*.tmp"))  # atomic write left no temporary file
+
+
+def test_a_checkpoint_saved_before_depth_smoothing_existed_reads_raw_depth(tmp_path) -> None:
+    net = PoseNet(backbone="pointnet", num_points=64)
+    path = tmp_path / "old.pt"
+    save_checkpoint(path, net)
+    payload = torch.load(path, weights_only=True)
+    del payload["config"]["depth_smoothing_px"]  # as written by earlier versions
+    torch.save(payload, path)
+    assert load_checkpoint(path)[0].config.depth_smoothing_px == 0.0
+
+
+def test_load_weights_lets_the_input_fields_change_but_not_the_shape(tmp_path) -> None:
+    torch.manual_seed(0)
+    trained = PoseNet(backbone="pointnet", num_points=64)
+    path = tmp_path / "ckpt.pt"
+    save_checkpoint(path, trained)
+    smoothed = PoseNet(backbone="pointnet", num_points=64, depth_smoothing_px=4.0)
+    load_weights(smoothed, path)
+    assert smoothed.config.depth_smoothing_px == 4.0
+    assert all(torch.equal(v, trained.state_dict()[k]) for k, v in smoothed.state_dict().items())
+    with pytest.raises(CheckpointMismatchError) as info:
+        load_weights(PoseNet(backbone="pointnet", num_points=64, hidden=32), path)
+    assert set(info.value.mismatches) == {"hidden"}
 
 
 def test_load_backbone_switches_the_head_and_names_mismatches(tmp_path) -> None:

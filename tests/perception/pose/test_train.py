@@ -148,6 +148,11 @@ def test_init_fine_tunes_from_a_checkpoint(tmp_path, models) -> None:
     with pytest.raises(CheckpointMismatchError):
         train(PoseNetConfig(backbone="pointnet", num_points=128), TrainConfig(epochs=1, progress=False),
               ds, val, tmp_path / "d", init=init)
+    # Fine-tuning for smoothed depth starts from the same weights and saves the new input field.
+    smoothed = PoseNetConfig(backbone="pointnet", num_points=64, depth_smoothing_px=4.0)
+    model, rows = train(smoothed, tiny, ds, val, tmp_path / "e", init=init)
+    assert rows[0]["val_loss"] == pytest.approx(val_loss, rel=1e-5)
+    assert load_checkpoint(tmp_path / "e" / "best.pt")[0].config.depth_smoothing_px == 4.0
 
 
 def test_cli_train_pose_init(tmp_path, models) -> None:
@@ -163,6 +168,19 @@ def test_cli_train_pose_init(tmp_path, models) -> None:
     assert main([*common, "--out", str(tmp_path / "b"), "--num-points", "64", "--init", init]) == 0
     assert main([*common, "--out", str(tmp_path / "c"), "--num-points", "128", "--init", init]) == 2
     assert main([*common, "--out", str(tmp_path / "d"), "--num-points", "64", "--init", str(tmp_path / "no.pt")]) == 2
+
+
+def test_cli_depth_smoothing_needs_a_detectors_scene_clouds(tmp_path, capsys) -> None:
+    from perception.cli_pose import main
+
+    base = ["train-pose", "--out", str(tmp_path / "x"), "--epochs", "1", "--quiet"]
+    assert main([*base, "--depth-smoothing-px", "4"]) == 2  # rendered views: no depth image to smooth
+    assert "--depth-smoothing-px needs --scenes" in capsys.readouterr().err
+    assert main([*base, "--depth-smoothing-px", "4", "--scenes", str(tmp_path)]) == 2  # oracle masks
+    assert "--depth-smoothing-px" in capsys.readouterr().err
+    assert main([*base, "--depth-smoothing-px", "-2"]) == 2
+    assert "depth_smoothing_px" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
 
 
 def test_best_checkpoint_selected_by_axis_error(tmp_path, models) -> None:
