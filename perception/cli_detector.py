@@ -93,6 +93,9 @@ def _pipeline(args: argparse.Namespace):
     soil = None if args.soil_margin_mm <= 0 else args.soil_margin_mm / 1000.0
     edge = None if args.edge_tolerance_mm <= 0 else args.edge_tolerance_mm / 1000.0
     print(f"masks: {describe_detector(args.detector)}")
+    sigma = estimator.config.depth_smoothing_px
+    print(f"clouds: depth smoothed in each mask, sigma {sigma:g} px (the network's setting)" if sigma > 0
+          else "clouds: raw depth")
     return PosePipeline(estimator, detector, soil_margin_m=soil, edge_tolerance_m=edge), oracle
 
 

@@ -36,7 +36,8 @@ def _cmd_train(args: Any) -> int:
             return 2
     try:
         cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v0" if residual else args.env_id,
-                          normalize=args.normalize or residual, scene_pool=args.scene_pool,
+                          normalize=args.normalize or residual, normalize_reward=args.normalize_reward,
+                          scene_pool=args.scene_pool,
                           residual_scale=args.residual_scale if residual else 0.0,
                           residual_until_held=args.residual_until_held,
                           residual_approach_only=args.residual_approach_only,
@@ -81,6 +82,7 @@ def _cmd_train_bc(args: Any) -> int:
                "--residual-approach-only": (args.residual_approach_only, "it trains no residual"),
                "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic"),
                "--reward-pose": (args.reward_pose != "estimate", "it is trained on actions, not rewards"),
+               "--normalize-reward": (args.normalize_reward, "it is trained on actions, not rewards"),
                "--vec-env": (args.vec_env != "subproc", "it collects its demonstrations in one env"),
                "--flat-observation": (args.flat_observation, "it clones a MultiInputPolicy")}
     for flag, (given, why) in rl_only.items():
@@ -130,6 +132,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--env-id", choices=ENV_IDS, default=defaults.env_id,
                    help="SMS3DPickTrain-v0: the learnable options (latched suction, staged reward, ...)")
     p.add_argument("--normalize", action="store_true", help="standardise observations (VecNormalize)")
+    p.add_argument("--normalize-reward", action="store_true",
+                   help="rl/residual, with --normalize: also scale training rewards by the running std of the "
+                        "discounted return (keeps the success step's value gradients from shrinking the policy's)")
     p.add_argument("--scene-pool", type=int, default=defaults.scene_pool,
                    help="draw training beds from a pool of this many (0: a new bed per reset)")
     p.add_argument("--steps", type=int, default=defaults.total_steps, help="total env steps")

@@ -46,6 +46,15 @@ class TrainConfig:
             learnable options: latched suction, staged reward, dead-end episode end, task
             observations; ``reward_type`` is then ignored and must stay at its default).
         normalize: standardise observations with running statistics (``VecNormalize``).
+        normalize_reward: also scale training rewards by the running standard deviation of the
+            discounted return (``VecNormalize(norm_reward=True)``; needs ``normalize``; logs,
+            evaluations and ``is_success`` keep the true rewards). Why: SB3's PPO clips the norm
+            of the policy's and the value function's gradients *together* (``max_grad_norm``
+            0.5), and the staged reward's success step pays up to 249 at once, so a rollout with
+            successes has value gradients that shrink its own policy step. Measured on the
+            session-19 seed-0 run's checkpoints: the policy step of a minibatch was scaled by
+            0.007 on a rollout with successes (returns up to 141) against 0.04 on one without
+            (benchmarks/RESULTS.md, "Session 20").
         scene_pool: > 0: each env draws its beds from a pool of this many (the env's
             ``scene_pool``; resets then cost physics, not placement and compilation).
         residual_scale: > 0 trains a residual on top of the scripted picker
@@ -117,6 +126,7 @@ class TrainConfig:
     algo: str = "ppo"
     env_id: str = "SMS3DPick-v0"
     normalize: bool = False
+    normalize_reward: bool = False
     scene_pool: int = 0
     residual_scale: float = 0.0
     residual_until_held: bool = False
@@ -176,6 +186,10 @@ class TrainConfig:
             raise bad("reward_type", "is set by SMS3DPickTrain-v0 (staged); leave it at its default")
         if not isinstance(self.normalize, bool):
             raise bad("normalize", "must be a bool")
+        if not isinstance(self.normalize_reward, bool):
+            raise bad("normalize_reward", "must be a bool")
+        if self.normalize_reward and not self.normalize:
+            raise bad("normalize_reward", "needs normalize=True (--normalize): the same VecNormalize scales both")
         if self.vec_env not in VEC_ENVS:
             raise bad("vec_env", f"must be one of {VEC_ENVS}")
         if not isinstance(self.flat_observation, bool):

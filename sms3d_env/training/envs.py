@@ -41,9 +41,12 @@ def vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | N
                         monitor_kwargs={"info_keywords": ("is_success", "failure_cause", "start")})
 
 
-def normalized(env: Any, training: bool) -> Any:
-    """Observations standardised by running statistics (rewards as they are: the staged reward
-    is bounded already, and evaluation reports true returns)."""
+def normalized(env: Any, training: bool, reward_gamma: float | None = None) -> Any:
+    """Observations standardised by running statistics. Rewards as they are unless
+    ``reward_gamma`` is given: then scaled by the running standard deviation of the return
+    discounted with it (SB3's ``norm_reward``; for training only: evaluation reports true
+    returns)."""
     from stable_baselines3.common.vec_env import VecNormalize
 
-    return VecNormalize(env, norm_obs=True, norm_reward=False, training=training)
+    return VecNormalize(env, norm_obs=True, norm_reward=reward_gamma is not None,
+                        gamma=0.99 if reward_gamma is None else reward_gamma, training=training)

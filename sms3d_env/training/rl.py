@@ -184,7 +184,7 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
     (out / "config.json").write_text(json.dumps(saved, indent=2))
     env = vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"), cfg.vec_env)
     if cfg.normalize:
-        env = normalized(env, training=True)
+        env = normalized(env, training=True, reward_gamma=cfg.gamma if cfg.normalize_reward else None)
     eval_env = None
     try:
         model = _build_model(cfg, env)

@@ -259,3 +259,20 @@ def test_match_splits_the_cap_top_error_along_and_across_the_stem():
     (row,) = match([est], [truth])
     assert row["matched"] and row["axis_error_deg"] == pytest.approx(0.0, abs=1e-6)
     assert row["cap_top_error_mm"] == pytest.approx(5.0) and row["cap_top_lateral_error_mm"] == pytest.approx(4.0)
+
+
+def test_eval_pipeline_names_how_its_clouds_are_cut(tmp_path, capsys):
+    import argparse
+
+    from perception.cli_detector import _pipeline
+    from perception.pose.pose_net import save_checkpoint
+
+    path = tmp_path / "smoothed.pt"
+    save_checkpoint(path, PoseNet(PoseNetConfig(backbone="pointnet", num_points=64, hidden=16, depth_smoothing_px=3.0)))
+    args = argparse.Namespace(weights=str(path), detector="oracle", soil_margin_mm=0.0, edge_tolerance_mm=0.0,
+                              score_threshold=None)
+    pipeline, oracle = _pipeline(args)
+    out = capsys.readouterr().out
+    assert oracle and "clouds: depth smoothed in each mask, sigma 3 px (the network's setting)" in out
+    depth, cap, _ = _dome_over_soil()
+    assert np.array_equal(pipeline.cloud_pixels(cap, depth)[1], smooth_depth_in_mask(depth, cap, 3.0))

@@ -409,6 +409,21 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
     _check_eval(tmp_path / "model.zip")
 
 
+def test_normalised_rewards_are_scaled_by_the_discounted_returns_spread(tmp_path):
+    import pickle
+
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", n_envs=2, vec_env="dummy", flat_observation=True,
+                      normalize=True, normalize_reward=True, total_steps=256, n_steps=64, batch_size=64,
+                      out=str(tmp_path), **{**FAST, "checkpoint_freq": 0})
+    train_policy(cfg)
+    with open(tmp_path / "vecnormalize.pkl", "rb") as f:
+        stats = pickle.load(f)
+    assert stats.norm_reward and stats.gamma == cfg.gamma and stats.ret_rms.count > 256
+    assert json.loads((tmp_path / "config.json").read_text())["normalize_reward"] is True
+    with pytest.raises(ValueError, match="normalize_reward needs normalize"):
+        TrainConfig(normalize_reward=True)
+
+
 def test_a_run_cannot_start_from_a_model_of_the_other_observation_layout(ppo_run, tmp_path):
     out, _ = ppo_run  # dict observations
     cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, flat_observation=True,
