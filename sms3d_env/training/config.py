@@ -79,7 +79,7 @@ class TrainConfig:
             ``LinearSchedule``; the PPO paper anneals its rate so), so that one run lowers the rate
             that a second phase, started from the first's checkpoint, lowered by hand. The schedule runs over
             ``total_steps``: with ``max_wall_s``, set ``total_steps`` to what fits in it (PPO on 2
-            envs here: 480–640 steps/s), or the rate stops short of its final value; or set
+            envs here: 280–420 steps/s, sessions 15–20), or the rate stops short of its final value; or set
             ``learning_rate_by_wall``.
         learning_rate_by_wall: the falling rate runs over whichever ends first, ``total_steps`` or
             ``max_wall_s`` (:class:`sms3d_env.training.schedules.WallAwareLinearSchedule`), so a
