@@ -16,6 +16,7 @@ Usage: python benchmarks/bench_ppo_gradient_share.py RUN_DIR --steps 300000 1200
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -27,6 +28,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from sms3d_env.training import TrainConfig  # noqa: E402
+from sms3d_env.training.actor import observation_stats_path  # noqa: E402
 from sms3d_env.training.envs import vec_env  # noqa: E402
 
 
@@ -43,13 +45,15 @@ def gradient_share(run: Path, steps: int, seed: int) -> dict[str, float]:
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import VecNormalize
 
-    cfg = TrainConfig.from_dict(__import__("json").loads((run / "config.json").read_text()))
-    if cfg.algo != "ppo" or not cfg.normalize:
-        raise SystemExit(f"{run}: needs a PPO run trained with --normalize")
+    cfg = TrainConfig.from_dict(json.loads((run / "config.json").read_text()))
+    checkpoint = run / "checkpoints" / f"ppo_{steps}_steps.zip"
+    stats = observation_stats_path(checkpoint)
+    if cfg.algo != "ppo" or stats is None:
+        raise SystemExit(f"{checkpoint}: needs a PPO checkpoint of a run trained with --normalize")
     env = vec_env(cfg.env_kwargs(), cfg.n_envs, seed, None, "dummy")
-    env = VecNormalize.load(str(run / "checkpoints" / f"ppo_vecnormalize_{steps}_steps.pkl"), env)
+    env = VecNormalize.load(str(stats), env)
     env.training = False  # the checkpoint's statistics, as they were
-    model = PPO.load(str(run / "checkpoints" / f"ppo_{steps}_steps.zip"), env=env, device="cpu")
+    model = PPO.load(str(checkpoint), env=env, device="cpu")
 
     class _Continue(BaseCallback):
         def _on_step(self) -> bool:
