@@ -27,6 +27,11 @@ from perception.cli_detector import millimetres
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 from perception.pose.config import PoseNetConfig, TrainConfig
 
+CAMERA_MODEL_HELP = (
+    "rendered single-mushroom views go through the dataset's stereo camera model (every depth effect of "
+    "`sms3d generate --realism`, D405) instead of 0.5 mm white depth noise"
+)
+
 # torch, the data pipeline and the networks are imported inside the commands: ``register`` runs
 # for every ``sms3d`` invocation, ``--help`` included, and loading them takes seconds.
 
@@ -42,10 +47,11 @@ def _ids(text: str) -> tuple[int, ...]:
 
 def _samples(
     data: str | None, n: int, seed: int, model_ids: Sequence[int] | None, cache: Path | None, label: str,
-    procedural: int = 0,
+    procedural: int = 0, camera_model: bool = False,
 ):  # fmt: skip
     from perception.pose.data import load_samples, save_samples
     from perception.pose.synthetic_views import (
+        ViewConfig,
         default_models,
         generate_samples,
         procedural_mesh_models,
@@ -55,13 +61,14 @@ def _samples(
         return load_samples(data)
     shapes = f"procedural{procedural}" if procedural else f"models{'-'.join(map(str, model_ids or []))}"
     if cache is not None:
-        path = cache / f"{label}_n{n}_seed{seed}_{shapes}.npz"
+        path = cache / f"{label}_n{n}_seed{seed}_{shapes}{'_camera' if camera_model else ''}.npz"
         if path.exists():
             return load_samples(path)
     t = time.perf_counter()
     models = procedural_mesh_models(procedural, seed) if procedural else default_models(model_ids=model_ids)
-    samples = generate_samples(n, seed, models)
-    print(f"rendered {n} {label} views (seed {seed}) in {time.perf_counter() - t:.1f} s", file=sys.stderr)
+    samples = generate_samples(n, seed, models, ViewConfig(camera_model=camera_model))
+    camera = ", camera model" if camera_model else ""
+    print(f"rendered {n} {label} views (seed {seed}{camera}) in {time.perf_counter() - t:.1f} s", file=sys.stderr)
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
         save_samples(path, samples)
@@ -118,6 +125,11 @@ def cmd_train(args: argparse.Namespace) -> int:
         if given and not args.scenes:
             print(f"error: {flag} needs --scenes", file=sys.stderr)
             return 2
+    renders_views = bool(args.add_synthetic) if args.scenes else not (args.data and args.val_data)
+    if args.camera_model and not renders_views:
+        print("error: --camera-model applies to rendered views: with --scenes add --add-synthetic N; "
+              "with --data and --val-data nothing is rendered", file=sys.stderr)
+        return 2
     if args.scenes:
         try:
             train_s = _scene_samples(args, "train", args.seed)
@@ -127,14 +139,18 @@ def cmd_train(args: argparse.Namespace) -> int:
             return 2
         if args.add_synthetic:
             train_s = train_s + _samples(
-                None, args.add_synthetic, args.seed * 1000 + 1, args.model_ids, cache, "train", args.procedural_models
+                None, args.add_synthetic, args.seed * 1000 + 1, args.model_ids, cache, "train", args.procedural_models,
+                args.camera_model,
             )
         print(f"training on {len(train_s)} instances, validating on {len(val_s)}", file=sys.stderr)
     else:
         train_s = _samples(
-            args.data, args.num_train, args.seed * 1000 + 1, args.model_ids, cache, "train", args.procedural_models
+            args.data, args.num_train, args.seed * 1000 + 1, args.model_ids, cache, "train", args.procedural_models,
+            args.camera_model,
         )
-        val_s = _samples(args.val_data, args.num_val, args.seed * 1000 + 2, args.model_ids, cache, "val")
+        val_s = _samples(
+            args.val_data, args.num_val, args.seed * 1000 + 2, args.model_ids, cache, "val", 0, args.camera_model
+        )
     tr = PointCloudPoseDataset(train_s, net.num_points, net.use_rgb, cfg.augment, seed=args.seed)
     va = PointCloudPoseDataset(val_s, net.num_points, net.use_rgb, None, seed=args.seed + 1)
     t = time.perf_counter()
@@ -157,6 +173,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from perception.pose.pose_net import load_checkpoint
     from perception.pose.train import evaluate
 
+    if args.camera_model and (args.scenes or args.data):
+        print("error: --camera-model applies to rendered views: drop --scenes / --data", file=sys.stderr)
+        return 2
     torch.set_num_threads(args.threads)
 
     path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
@@ -165,7 +184,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.scenes:
         samples = samples_from_scenes(args.scenes, args.split, cap_only=args.cap_only, seed=args.seed)
     else:
-        samples = _samples(args.data, args.num, args.seed, args.model_ids, None, "test")
+        samples = _samples(args.data, args.num, args.seed, args.model_ids, None, "test", 0, args.camera_model)
     ds = PointCloudPoseDataset(samples, net.num_points, net.use_rgb, None, seed=args.seed)
     _, m, *_ = evaluate(model, ds, device=args.device)
     print(json.dumps({"checkpoint": str(path), "config": net.to_dict(), **m.as_dict()}, indent=2))
@@ -226,6 +245,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--add-synthetic", type=int, default=0, metavar="N",
         help="with --scenes: also train on N rendered single-mushroom views (seed SEED*1000+1, --model-ids)",
     )  # fmt: skip
+    p.add_argument("--camera-model", action="store_true", help=CAMERA_MODEL_HELP)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_train)
 
@@ -238,6 +258,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--num", type=int, default=500)
     e.add_argument("--seed", type=int, default=12345)
     e.add_argument("--model-ids", type=_ids, default=None, help="generator model ids (default: all)")
+    e.add_argument("--camera-model", action="store_true", help=CAMERA_MODEL_HELP)
     e.add_argument("--device", default="cpu")
     e.add_argument("--threads", type=int, default=2)
     e.set_defaults(func=cmd_eval)

@@ -31,7 +31,7 @@ from perception.plots.error_plots import plot_errors
 from perception.pose.data import PointCloudSample, samples_from_scenes
 from perception.pose.estimator import PoseEstimator, default_weights_path
 from perception.pose.metrics import errors_deg
-from perception.pose.synthetic_views import default_models, generate_samples
+from perception.pose.synthetic_views import ViewConfig, default_models, generate_samples
 
 #: Bins of the breakdowns: visible points of the instance, stem angle to the camera's -z (°).
 POINT_BINS = (0, 200, 500, 1000, 2000, 4000, np.inf)
@@ -104,6 +104,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--split", default="test", help="scene split ('all' for every scene)")
     p.add_argument("--no-synthetic", action="store_true", help="skip the synthetic-view sets")
     p.add_argument("--num", type=int, default=500, help="synthetic views per set")
+    p.add_argument("--camera-model", action="store_true",
+                   help="synthetic views through the dataset's stereo camera model (ViewConfig camera_model)")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--views", type=int, default=1, help="test-time views averaged per cloud (PoseEstimator views)")
     p.add_argument("--upright-pass", action="store_true", help="PoseEstimator upright_pass: views again on the uprighted cloud")
@@ -117,9 +119,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     est = PoseEstimator.from_checkpoint(path, sampling="random", seed=0, views=args.views, upright_pass=args.upright_pass)
     out: dict[str, dict[str, float]] = {}
     if not args.no_synthetic:
-        for label, seed, ids in (("synthetic views, training models (ids 0-5), seed 3001", 3001, (0, 1, 2, 3, 4, 5)),
-                                 ("synthetic views, held-out models (id 6), seed 3002", 3002, (6,))):
-            samples = generate_samples(args.num, seed, default_models(model_ids=ids))
+        views = ViewConfig(camera_model=args.camera_model)
+        camera = ", camera model" if args.camera_model else ""
+        for label, seed, ids in ((f"synthetic views{camera}, training models (ids 0-5), seed 3001", 3001, (0, 1, 2, 3, 4, 5)),
+                                 (f"synthetic views{camera}, held-out models (id 6), seed 3002", 3002, (6,))):
+            samples = generate_samples(args.num, seed, default_models(model_ids=ids), views)
             out[label], err = evaluate_set(est, samples)
             print(label, json.dumps(out[label]), flush=True)
             if args.plots and seed == 3001:

@@ -8,19 +8,28 @@ dense surface samples with back faces culled are projected and each pixel keeps 
 depth. Parts below the soil are cut. The depth crop is back-projected with
 :func:`perception.pointcloud.depth_to_points`, so views go through the same path as real data.
 
+With ``ViewConfig(camera_model=True)`` the crop, widened by :data:`CAMERA_MODEL_MARGIN_PX` and
+with the soil plane behind the mushroom, goes through the dataset's stereo camera model
+(:func:`generator.dataset.realism.apply_depth_realism`, every depth effect of ``sms3d generate
+--realism``, D405) instead of the white ``depth_noise_std``: correlated and quantised disparity
+noise, flying pixels and stereo shadows at the cap's rim, edge holes. The mushroom's own pixels
+are kept, so flying pixels on its side of the rim stay in the cloud as they would in a mask.
+
 Meshes come from ``generator.mushroom_models.model_library`` (see :func:`default_models`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 
 import numpy as np
 import trimesh
 
 from generator.camera import Intrinsics
+from generator.dataset.options import RealismOptions
+from generator.dataset.realism import apply_depth_realism
 from generator.geometry import rotation_xyz
 from perception.errors import PerceptionConfigError
 from perception.pointcloud import MIN_POINTS, depth_to_points
@@ -29,6 +38,11 @@ from perception.pose.data import PointCloudSample
 #: World-from-camera rotation for a camera looking straight down (OpenCV axes):
 #: camera x = world x, camera y = world −y, camera z = world −z.
 CAMERA_FROM_WORLD = np.diag([1.0, -1.0, -1.0])
+
+#: Soil pixels around the mushroom's crop when the camera model is on: wider than the stereo
+#: shadow of a cap 80 mm above the soil (f·B·Δ(1/z) ≈ 3.5 px for the D405 at 0.40 m) and than the
+#: 7 px matching window, so that the rim's effects are those of a full image.
+CAMERA_MODEL_MARGIN_PX = 8
 
 
 @dataclass(frozen=True)
@@ -44,8 +58,9 @@ class ViewConfig:
     stretch_range: tuple[float, float] = (0.9, 1.1)
     insertion_depth: float = 0.002  # m
     xy_range: float = 0.12  # m, mushroom position uniform in ±xy_range below the camera
-    depth_noise_std: float = 0.0005  # m, Gaussian depth noise
+    depth_noise_std: float = 0.0005  # m, Gaussian depth noise (unused with camera_model)
     surface_samples: int = 60000
+    camera_model: bool = False  # the dataset's D405 stereo camera model instead of depth_noise_std
 
     def __post_init__(self) -> None:
         for name in ("width", "height", "surface_samples"):
@@ -161,14 +176,30 @@ def render_view(model: MeshModel, rng: np.random.Generator, config: ViewConfig |
     cap_px[flat[first]] = is_cap[first]
     depth = depth.reshape(h, w)
     valid = np.isfinite(depth)
-    if cfg.depth_noise_std > 0:
+    cap_px = cap_px.reshape(h, w)
+    if cfg.camera_model:
+        m = CAMERA_MODEL_MARGIN_PX
+        depth, valid, cap_px = (np.pad(a, m) for a in (depth, valid, cap_px))
+        u0, v0 = u0 - m, v0 - m
+        depth = _camera_model_depth(np.where(valid, depth, cfg.camera_height), cfg.focal_px, rng)
+        valid &= depth > 0
+    elif cfg.depth_noise_std > 0:
         depth = depth + rng.normal(0.0, cfg.depth_noise_std, depth.shape)
     depth[~valid] = 0.0
-    rgb = np.where(cap_px.reshape(h, w, 1), np.array(model.cap_rgb), np.array(model.stem_rgb))
-    rgb = np.clip(rgb * rng.uniform(0.85, 1.0, (h, w, 1)), 0, 1).astype(np.float32)
-    crop = Intrinsics(int(w), int(h), K.fx, K.fy, K.cx - u0, K.cy - v0)
+    rgb = np.where(cap_px[..., None], np.array(model.cap_rgb), np.array(model.stem_rgb))
+    rgb = np.clip(rgb * rng.uniform(0.85, 1.0, (*depth.shape, 1)), 0, 1).astype(np.float32)
+    crop = Intrinsics(int(depth.shape[1]), int(depth.shape[0]), K.fx, K.fy, K.cx - u0, K.cy - v0)
     points, colors = depth_to_points(depth, crop, valid, rgb)
     return PointCloudSample(points, R_cm.astype(np.float32), colors, meta)
+
+
+def _camera_model_depth(depth: np.ndarray, focal_px: float, rng: np.random.Generator) -> np.ndarray:
+    """``depth`` (a crop with soil behind the mushroom) through every depth effect of the
+    dataset's camera model (D405). The invalid band along the image's left edge is left out: a
+    crop's left edge is not the image's."""
+    options = replace(RealismOptions.all_on(), stereo_shadows_left_band=False)
+    noisy, _ = apply_depth_realism(depth, focal_px, "d405", options, rng)
+    return noisy.astype(np.float64)
 
 
 def generate_samples(

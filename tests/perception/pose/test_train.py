@@ -214,3 +214,58 @@ def test_ablation_writes_its_table_and_resumes(models, tmp_path, monkeypatch) ->
     assert ablation.run_ablation(variants, samples[:16], samples[16:20], samples[20:], cfg, tmp_path) == rows
     with pytest.raises(ValueError, match="other settings"):
         ablation.run_ablation(variants, samples[:12], samples[16:20], samples[20:], cfg, tmp_path)
+
+
+def _depth_by_ray(points: np.ndarray, focal_px: float) -> dict[tuple[int, int], float]:
+    """Depth per pixel, keyed by the pixel's ray (x/z, y/z in pixels): the same key in a clean
+    and a noisy view of the same pose whatever the noise did to the depth."""
+    rays = np.rint(points[:, :2] / points[:, 2:3] * focal_px).astype(int)
+    return {(int(u), int(v)): float(z) for (u, v), z in zip(rays, points[:, 2], strict=True)}
+
+
+def test_camera_model_views_carry_the_stereo_noise_of_the_formula(models) -> None:
+    """Same seed, same pose: the camera-model view's depth departs from the clean view's by the
+    stereo RMS error σz = z²·s/(f·B) (D405, s = 0.08 px), correlated between neighbours, and the
+    rim has flying pixels towards the soil."""
+    upright = dict(tilt_std_deg=0.0, xy_range=0.0)
+    residuals, sigmas, neighbour_pairs, flying = [], [], [], 0
+    for seed in range(6):
+        clean = render_view(models[0], np.random.default_rng(seed), ViewConfig(depth_noise_std=0.0, **upright))
+        noisy = render_view(models[0], np.random.default_rng(seed), ViewConfig(camera_model=True, **upright))
+        np.testing.assert_array_equal(clean.rotation, noisy.rotation)
+        clean_z, noisy_z = _depth_by_ray(clean.points, 382.0), _depth_by_ray(noisy.points, 382.0)
+        diff = {k: noisy_z[k] - clean_z[k] for k in clean_z.keys() & noisy_z.keys()}
+        residuals += list(diff.values())
+        sigmas += [clean_z[k] ** 2 * 0.08 / (382.0 * 0.018) for k in diff]
+        neighbour_pairs += [(diff[k], diff[(k[0] + 1, k[1])]) for k in diff if (k[0] + 1, k[1]) in diff]
+        flying += int((noisy.points[:, 2] > clean.points[:, 2].max() + 0.005).sum())
+    r = np.array(residuals)
+    robust_std = 1.4826 * np.median(np.abs(r - np.median(r)))
+    assert robust_std == pytest.approx(np.mean(sigmas), rel=0.35)
+    assert np.corrcoef(np.array(neighbour_pairs).T)[0, 1] > 0.5  # white noise would give ≈ 0
+    assert flying > 0
+
+
+def test_camera_model_views_are_deterministic(models) -> None:
+    views = ViewConfig(camera_model=True, surface_samples=8000)
+    a, b = generate_samples(2, 11, models, views), generate_samples(2, 11, models, views)
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x.points, y.points) and np.array_equal(x.colors, y.colors)
+
+
+def test_cli_camera_model_views(tmp_path, capsys) -> None:
+    from perception.cli_pose import main
+
+    common = ["--backbone", "pointnet", "--num-points", "64", "--epochs", "1", "--threads", "1", "--quiet",
+              "--model-ids", "0", "--num-train", "12", "--num-val", "4", "--cache", str(tmp_path / "cache")]
+    assert main(["train-pose", "--out", str(tmp_path / "a"), "--camera-model", *common]) == 0
+    assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == [
+        "train_n12_seed1_models0_camera.npz", "val_n4_seed2_models0_camera.npz"]
+    assert main(["eval-pose", "--checkpoint", str(tmp_path / "a" / "best.pt"), "--num", "4", "--model-ids", "0",
+                 "--threads", "1", "--camera-model"]) == 0
+    capsys.readouterr()
+    assert main(["train-pose", "--out", str(tmp_path / "b"), "--camera-model", "--scenes", str(tmp_path)]) == 2
+    assert "--add-synthetic" in capsys.readouterr().err
+    assert main(["eval-pose", "--camera-model", "--scenes", str(tmp_path)]) == 2
+    assert "--camera-model applies to rendered views" in capsys.readouterr().err
+    assert not (tmp_path / "b").exists()
