@@ -64,7 +64,7 @@ class StallEscapingPicker(ScriptedPicker):
         self.trail.append(o.p.copy())
         stalled = (len(self.trail) > self.window
                    and np.linalg.norm(self.trail[-1] - self.trail[-1 - self.window]) < self.still)
-        if stalled and np.linalg.norm(self._approach_goal(o) - o.p) < self.radius:
+        if stalled and np.linalg.norm(self.approach_goal(o) - o.p) < self.radius:
             self.phase = "descend"
             return self._descend(o)
         return super()._approach(o)

@@ -93,7 +93,7 @@ class ScriptedPicker:
         a = np.concatenate([v / self.vmax, w / self.wmax, [command]])
         return np.clip(a, -1, 1).astype(np.float32)
 
-    def _approach_goal(self, o: _View) -> np.ndarray:
+    def approach_goal(self, o: _View) -> np.ndarray:
         """Where the approach ends (the tool site): the stand-off point above the cap top."""
         return o.c + o.axis * self.standoff
 
@@ -113,7 +113,7 @@ class ScriptedPicker:
         return 3.0 * np.cross(o.z, -o.axis)
 
     def _approach(self, o: _View) -> np.ndarray:
-        err = self._approach_goal(o) - o.p
+        err = self.approach_goal(o) - o.p
         ang = np.degrees(np.arccos(np.clip(o.z @ -o.axis, -1, 1)))
         if np.linalg.norm(err) < 0.003 and ang < 3.0:
             self.phase = "descend"
@@ -191,7 +191,7 @@ class HandPicker(ScriptedPicker):
         self.close_steps = close_steps
         super().__init__(*args, **kwargs)
 
-    def _approach_goal(self, o: _View) -> np.ndarray:
+    def approach_goal(self, o: _View) -> np.ndarray:
         return o.c + o.axis * (self.grasp_offset + self.standoff)
 
     def _descend(self, o: _View) -> np.ndarray:

@@ -95,6 +95,7 @@ class PolicyActor:
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
         self.residual_until_held = bool(self.saved.get("residual_until_held", False))
         self.residual_approach_only = bool(self.saved.get("residual_approach_only", False))
+        self.residual_descend_trigger = bool(self.saved.get("residual_descend_trigger", False))
         # A policy trained on the flattened observation: the keys in their concatenation order.
         self.observation_keys: list[str] | None = self.saved.get("observation_keys")
         if self.saved.get("flat_observation") and self.observation_keys is None:
@@ -117,6 +118,7 @@ class PolicyActor:
         from sms3d_env.training.envs import make_env
 
         return make_env(self.env_id, self.residual_scale, self.residual_until_held, self.residual_approach_only,
+                        self.residual_descend_trigger,
                         **{**kwargs, **self.env_options})
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:

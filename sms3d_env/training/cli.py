@@ -30,7 +30,8 @@ def _cmd_train(args: Any) -> int:
     pose_source = args.pose_source or ("noisy" if noisy else "oracle")
     residual = args.recipe == "residual"
     for flag, given in (("--residual-until-held", args.residual_until_held),
-                        ("--residual-approach-only", args.residual_approach_only)):
+                        ("--residual-approach-only", args.residual_approach_only),
+                        ("--residual-descend-trigger", args.residual_descend_trigger)):
         if given and not residual:
             print(f"error: {flag} applies to --recipe residual")
             return 2
@@ -41,6 +42,7 @@ def _cmd_train(args: Any) -> int:
                           residual_scale=args.residual_scale if residual else 0.0,
                           residual_until_held=args.residual_until_held,
                           residual_approach_only=args.residual_approach_only,
+                          residual_descend_trigger=args.residual_descend_trigger,
                           pose_error_range_deg=args.pose_error_range,
                           log_std_init=args.log_std_init if args.log_std_init is not None
                           else (-1.6 if residual else 0.0),
@@ -80,6 +82,7 @@ def _cmd_train_bc(args: Any) -> int:
                "--reach-lateral-weight": (args.reach_lateral_weight != 1, "it is trained on actions, not rewards"),
                "--residual-until-held": (args.residual_until_held, "it trains no residual"),
                "--residual-approach-only": (args.residual_approach_only, "it trains no residual"),
+               "--residual-descend-trigger": (args.residual_descend_trigger, "it trains no residual"),
                "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic"),
                "--reward-pose": (args.reward_pose != "estimate", "it is trained on actions, not rewards"),
                "--normalize-reward": (args.normalize_reward, "it is trained on actions, not rewards"),
@@ -159,6 +162,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--residual-approach-only", action="store_true",
                    help="--recipe residual: correct only the approach to the stand-off point; the scripted "
                         "picker's descent, seal, twist and lift run alone")
+    p.add_argument("--residual-descend-trigger", action="store_true",
+                   help="--recipe residual: an eighth action entry that, above 0.5 within 2 cm of the stand-off "
+                        "point, starts the scripted picker's descent from where the tool is (an escape from "
+                        "approach stalls, learned)")
     p.add_argument("--log-std-init", type=float, default=None,
                    help="initial log standard deviation of the policy (default 0; -1.6 for --recipe residual)")
     p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)

@@ -64,6 +64,9 @@ class TrainConfig:
         residual_approach_only: the residual corrects only the scripted picker's approach; its
             descent, seal, twist and lift run alone. Needs ``residual_scale`` > 0; excludes
             ``residual_until_held``.
+        residual_descend_trigger: the residual's action gains an entry that starts the scripted
+            picker's descent near the stand-off point (``ResidualPicker(descend_trigger=True)``).
+            Needs ``residual_scale`` > 0.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
             uniformly in that range (``pose_source`` must then be ``"noisy"`` and
             ``pose_error_deg`` 0).
@@ -131,6 +134,7 @@ class TrainConfig:
     residual_scale: float = 0.0
     residual_until_held: bool = False
     residual_approach_only: bool = False
+    residual_descend_trigger: bool = False
     pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
     max_wall_s: float | None = None
@@ -208,6 +212,10 @@ class TrainConfig:
         if self.residual_approach_only and self.residual_until_held:
             raise bad("residual_approach_only", "already drops the residual before the seal (leave "
                                                 "residual_until_held False)")
+        if not isinstance(self.residual_descend_trigger, bool):
+            raise bad("residual_descend_trigger", "must be a bool")
+        if self.residual_descend_trigger and not self.residual_scale:
+            raise bad("residual_descend_trigger", "applies to a residual (residual_scale > 0)")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:
@@ -309,6 +317,7 @@ class TrainConfig:
         return {"env_id": self.env_id, "residual_scale": self.residual_scale,
                 "residual_until_held": self.residual_until_held,
                 "residual_approach_only": self.residual_approach_only,
+                "residual_descend_trigger": self.residual_descend_trigger,
                 "flat_observation": self.flat_observation, **kw}
 
     @classmethod

@@ -404,6 +404,43 @@ def test_an_approach_only_residual_leaves_the_descent_on_to_the_scripted_picker(
         ResidualPicker(recorder, approach_only="yes")
 
 
+def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
+    from sms3d_env.training.residual import DESCEND_TRIGGER, DESCEND_TRIGGER_RADIUS_M, ResidualPicker
+
+    def run(trigger_value):
+        recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene_config=SMALL))
+        env = ResidualPicker(recorder, scale=0.5, approach_only=True, descend_trigger=True)
+        assert env.action_space.shape == (8,)
+        obs, _ = env.reset(seed=2)
+        action = np.zeros(8, np.float32)
+        action[7] = trigger_value
+        trace, done = [], False
+        while not done:
+            near, phase = env._near_standoff, env.picker.phase
+            obs, _, terminated, truncated, info = env.step(action)
+            trace.append((near, phase, info["descend_triggered"]))
+            done = terminated or truncated
+        return trace, recorder.commands
+
+    below, below_commands = run(DESCEND_TRIGGER - 0.1)  # under the threshold: the scripted picker
+    assert not any(t for _, _, t in below)
+    fired, fired_commands = run(1.0)
+    firing = [i for i, (_, _, t) in enumerate(fired) if t]
+    assert len(firing) == 1  # once: the descent has begun
+    i = firing[0]
+    near, phase, _ = fired[i]
+    assert near and phase == "approach" and not any(n for n, _, _ in fired[:i] if n)  # the first step within reach
+    assert fired[i + 1][1] == "descend"
+    # The scripted approach needs 3 mm to descend; within DESCEND_TRIGGER_RADIUS_M the trigger
+    # starts it earlier, so the approach commands end sooner than without it.
+    scripted_approach = sum(phase == "approach" for _, phase, _ in below)
+    assert i + 1 < scripted_approach
+    np.testing.assert_allclose(fired_commands[:i + 1], below_commands[:i + 1], atol=1e-6)
+    assert DESCEND_TRIGGER_RADIUS_M > 0.003
+    with pytest.raises(ValueError, match="descend_trigger"):
+        ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=1)
+
+
 def test_uniform_noisy_pose_errs_within_its_range():
     from sms3d_env.pose_sources import UniformNoisyPose
 

@@ -161,9 +161,10 @@ def test_the_reward_pose_reaches_the_training_env_only():
     assert "reward_pose" not in training_config.env_options(cfg.posture_target)  # evaluation envs: the default reward
 
 
-@pytest.mark.parametrize("option", ["residual_until_held", "residual_approach_only"])
+@pytest.mark.parametrize("option", ["residual_until_held", "residual_approach_only", "residual_descend_trigger"])
 def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option):
-    """``residual_until_held`` / ``residual_approach_only`` reach the training env's wrapper and,
+    """``residual_until_held`` / ``residual_approach_only`` / ``residual_descend_trigger`` reach the
+    training env's wrapper and,
     through ``config.json``, the env every later evaluation builds for the policy."""
     from sms3d_env.training.actor import PolicyActor
 
@@ -173,7 +174,8 @@ def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option)
     train_policy(cfg)
     env = PolicyActor(tmp_path / "model.zip").make_env()
     try:
-        wrapper_flag = {"residual_until_held": "until_held", "residual_approach_only": "approach_only"}[option]
+        wrapper_flag = {"residual_until_held": "until_held", "residual_approach_only": "approach_only",
+                        "residual_descend_trigger": "descend_trigger"}[option]
         assert getattr(env, wrapper_flag) and env.scale == 0.5
     finally:
         env.close()
