@@ -125,10 +125,10 @@ def cmd_train(args: argparse.Namespace) -> int:
         if given and not args.scenes:
             print(f"error: {flag} needs --scenes", file=sys.stderr)
             return 2
-    renders_views = bool(args.add_synthetic) if args.scenes else not (args.data and args.val_data)
+    renders_views = bool(args.add_synthetic) if args.scenes else not (args.data or args.val_data)
     if args.camera_model and not renders_views:
         print("error: --camera-model applies to rendered views: with --scenes add --add-synthetic N; "
-              "with --data and --val-data nothing is rendered", file=sys.stderr)
+              "drop --data / --val-data (their views were rendered already)", file=sys.stderr)
         return 2
     if args.scenes:
         try:

@@ -114,6 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     if args.plots and args.no_synthetic:
         p.error("--plots draws the synthetic training-model views: drop --no-synthetic")
+    if args.camera_model and args.no_synthetic:
+        p.error("--camera-model applies to the synthetic views: drop --no-synthetic")
     torch.set_num_threads(args.threads)
     path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
     est = PoseEstimator.from_checkpoint(path, sampling="random", seed=0, views=args.views, upright_pass=args.upright_pass)

@@ -26,6 +26,7 @@ from functools import cache
 
 import numpy as np
 import trimesh
+from scipy import ndimage
 
 from generator.camera import Intrinsics
 from generator.dataset.options import RealismOptions
@@ -39,9 +40,8 @@ from perception.pose.data import PointCloudSample
 #: camera x = world x, camera y = world −y, camera z = world −z.
 CAMERA_FROM_WORLD = np.diag([1.0, -1.0, -1.0])
 
-#: Soil pixels around the mushroom's crop when the camera model is on: wider than the stereo
-#: shadow of a cap 80 mm above the soil (f·B·Δ(1/z) ≈ 3.5 px for the D405 at 0.40 m) and than the
-#: 7 px matching window, so that the rim's effects are those of a full image.
+#: Soil pixels around the mushroom's crop when the camera model is on, so that the rim's
+#: neighbour effects (flying pixels, edge holes) see soil on their far side as in a full image.
 CAMERA_MODEL_MARGIN_PX = 8
 
 
@@ -74,6 +74,8 @@ class ViewConfig:
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise PerceptionConfigError(name, f"must be a finite number >= 0, got {v!r}")
+        if not isinstance(self.camera_model, bool):
+            raise PerceptionConfigError("camera_model", f"must be a bool, got {self.camera_model!r}")
         for name in ("scale_range", "stretch_range"):
             lo, hi = getattr(self, name)
             if not 0 < lo <= hi:
@@ -181,7 +183,7 @@ def render_view(model: MeshModel, rng: np.random.Generator, config: ViewConfig |
         m = CAMERA_MODEL_MARGIN_PX
         depth, valid, cap_px = (np.pad(a, m) for a in (depth, valid, cap_px))
         u0, v0 = u0 - m, v0 - m
-        depth = _camera_model_depth(np.where(valid, depth, cfg.camera_height), cfg.focal_px, rng)
+        depth = _camera_model_depth(_with_soil(depth, valid, cfg.camera_height), cfg.focal_px, rng)
         valid &= depth > 0
     elif cfg.depth_noise_std > 0:
         depth = depth + rng.normal(0.0, cfg.depth_noise_std, depth.shape)
@@ -191,6 +193,19 @@ def render_view(model: MeshModel, rng: np.random.Generator, config: ViewConfig |
     crop = Intrinsics(int(depth.shape[1]), int(depth.shape[0]), K.fx, K.fy, K.cx - u0, K.cy - v0)
     points, colors = depth_to_points(depth, crop, valid, rgb)
     return PointCloudSample(points, R_cm.astype(np.float32), colors, meta)
+
+
+def _with_soil(depth: np.ndarray, valid: np.ndarray, soil_depth: float) -> np.ndarray:
+    """``depth`` with the soil plane where no mushroom sample landed outside the mushroom, and
+    the nearest mushroom depth in the splat's gaps inside it (pixels no surface sample hit: not
+    pits down to the soil, which the camera model would turn into shadows and holes)."""
+    inside = ndimage.binary_fill_holes(valid)
+    out = np.where(valid, depth, soil_depth)
+    gaps = inside & ~valid
+    if gaps.any():
+        nearest = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
+        out[gaps] = depth[nearest[0][gaps], nearest[1][gaps]]
+    return out
 
 
 def _camera_model_depth(depth: np.ndarray, focal_px: float, rng: np.random.Generator) -> np.ndarray:

@@ -3,7 +3,8 @@
 Learning for Robot Control").
 
 ``ResidualPicker`` wraps a pick env: the scripted picker (``ScriptedPicker.for_env``) runs inside
-it on the same observation, the policy's action in [-1, 1]^7 is scaled by ``scale`` and added to
+it on the same observation, the policy's action in [-1, 1]^7 (its first 7 entries with
+``descend_trigger``) is scaled by ``scale`` and added to
 the picker's action, and the observation gains the picker's action (``base_action``) so that the
 policy knows what it corrects. An all-zero residual is the scripted picker exactly, so training
 starts from its success rate; PPO's action head starts near zero (orthogonal init, gain 0.01).
@@ -20,8 +21,9 @@ stand-off point, it starts the descent from where the tool is (session 19: under
 error the scripted approach stalls short of its 3 mm / 3 deg tolerance, and a hand-written escape
 from such stalls won 7 of 100 paired episodes at 20 deg; the trigger lets the policy learn when
 to give up on the approach, from what it sees: joint velocities, its command, the tool offset).
-The threshold is 2.5 standard deviations of the residual's initial action noise (log std -1.6)
-above zero, so an untrained residual rarely fires it.
+The threshold is 2.5 standard deviations of PPO's initial action noise for a residual (log std
+-1.6) above zero: about 0.6 % of steps, so an untrained residual fires it in about 6 % of normal
+approaches (some 11 steps within reach) and in about half of 100-step stalls.
 """
 
 from __future__ import annotations
@@ -48,7 +50,8 @@ class ResidualPicker(gym.Wrapper):
         approach_only: drop the residual once the scripted picker has left its approach phase
             (excludes ``until_held``, which it implies).
         descend_trigger: an eighth action entry that starts the descent near the stand-off point
-            (``info["descend_triggered"]`` is set on the step it does).
+            (``info["descend_triggered"]`` is set on the step it does). The descent's travel
+            limit grows by the tool's distance from the stand-off point.
     """
 
     def __init__(self, env: gym.Env, scale: float = 0.5, until_held: bool = False,
@@ -75,15 +78,14 @@ class ResidualPicker(gym.Wrapper):
             **env.observation_space.spaces,
             "base_action": spaces.Box(-1.0, 1.0, (7,), np.float32)})
         self._base = np.zeros(7, np.float32)
-        self._near_standoff = False  # the tool within DESCEND_TRIGGER_RADIUS_M of the stand-off point
+        self._standoff_gap = 0.0  # m, from the tool to the stand-off point
         self._held = False
         self._base_phase = "approach"  # the scripted picker's phase that produced ``_base``
 
     def _with_base(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         self._base_phase = self.picker.phase
         view = self.picker.view(obs)
-        gap = np.linalg.norm(self.picker.approach_goal(view) - view.p)
-        self._near_standoff = bool(gap < DESCEND_TRIGGER_RADIUS_M)
+        self._standoff_gap = float(np.linalg.norm(self.picker.approach_goal(view) - view.p))
         self._base = self.picker(obs)
         self._held = bool(obs["suction"][1] > 0.5)
         return {**obs, "base_action": self._base}
@@ -95,14 +97,19 @@ class ResidualPicker(gym.Wrapper):
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         a = np.asarray(action, np.float32)
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action of shape {a.shape} for a residual whose action space is "
+                             f"{self.action_space.shape} (descend_trigger={self.descend_trigger})")
         if (self.until_held and self._held) or (self.approach_only and self._base_phase != "approach"):
             command = self._base
         else:
             command = np.clip(self._base + self.scale * np.clip(a[:7], -1.0, 1.0), -1.0, 1.0)
-        triggered = (self.descend_trigger and self.picker.phase == "approach" and self._near_standoff
-                     and a[7] > DESCEND_TRIGGER)
+        triggered = (self.descend_trigger and self.picker.phase == "approach"
+                     and self._standoff_gap < DESCEND_TRIGGER_RADIUS_M and a[7] > DESCEND_TRIGGER)
         if triggered:  # the next command is the descent's, from where the tool is
             self.picker.phase = "descend"
+            # Its travel limit (stand-off + 2 cm, then lift) counts from the stand-off point.
+            self.picker.descended = -self._standoff_gap
         obs, reward, terminated, truncated, info = self.env.step(command)
         if self.descend_trigger:
             info["descend_triggered"] = bool(triggered)

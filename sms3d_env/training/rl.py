@@ -74,7 +74,13 @@ def _check_init_model(cfg: TrainConfig) -> None:
         raise InitModelError(f"TrainConfig.init_model: {path} belongs to the output folder {cfg.out}; "
                              "a continued run needs an out of its own")
     saved = saved_config_path(path)
-    flat = saved is not None and bool(json.loads(saved.read_text()).get("flat_observation", False))
+    saved_cfg = {} if saved is None else json.loads(saved.read_text())
+    trigger = bool(saved_cfg.get("residual_descend_trigger", False))
+    if trigger != cfg.residual_descend_trigger:
+        raise InitModelError(f"TrainConfig.init_model: {path} was trained {'with' if trigger else 'without'} the "
+                             f"residual's descend trigger ({8 if trigger else 7} actions); set "
+                             f"residual_descend_trigger={trigger} to start from it")
+    flat = bool(saved_cfg.get("flat_observation", False))
     if flat != cfg.flat_observation:
         raise InitModelError(f"TrainConfig.init_model: {path} was trained on "
                              f"{'flattened' if flat else 'dict'} observations; set flat_observation={flat} "

@@ -405,7 +405,11 @@ def test_an_approach_only_residual_leaves_the_descent_on_to_the_scripted_picker(
 
 
 def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
-    from sms3d_env.training.residual import DESCEND_TRIGGER, DESCEND_TRIGGER_RADIUS_M, ResidualPicker
+    from sms3d_env.training.residual import (
+        DESCEND_TRIGGER,
+        DESCEND_TRIGGER_RADIUS_M,
+        ResidualPicker,
+    )
 
     def run(trigger_value):
         recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene_config=SMALL))
@@ -416,7 +420,7 @@ def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
         action[7] = trigger_value
         trace, done = [], False
         while not done:
-            near, phase = env._near_standoff, env.picker.phase
+            near, phase = env._standoff_gap < DESCEND_TRIGGER_RADIUS_M, env.picker.phase
             obs, _, terminated, truncated, info = env.step(action)
             trace.append((near, phase, info["descend_triggered"]))
             done = terminated or truncated
@@ -431,12 +435,15 @@ def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
     near, phase, _ = fired[i]
     assert near and phase == "approach" and not any(n for n, _, _ in fired[:i] if n)  # the first step within reach
     assert fired[i + 1][1] == "descend"
+    with pytest.raises(ValueError, match="action of shape"):
+        env_for_shape = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=True)
+        env_for_shape.reset(seed=2)
+        env_for_shape.step(np.zeros(7, np.float32))
     # The scripted approach needs 3 mm to descend; within DESCEND_TRIGGER_RADIUS_M the trigger
     # starts it earlier, so the approach commands end sooner than without it.
     scripted_approach = sum(phase == "approach" for _, phase, _ in below)
     assert i + 1 < scripted_approach
     np.testing.assert_allclose(fired_commands[:i + 1], below_commands[:i + 1], atol=1e-6)
-    assert DESCEND_TRIGGER_RADIUS_M > 0.003
     with pytest.raises(ValueError, match="descend_trigger"):
         ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=1)
 

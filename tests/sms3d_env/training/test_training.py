@@ -177,6 +177,11 @@ def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option)
         wrapper_flag = {"residual_until_held": "until_held", "residual_approach_only": "approach_only",
                         "residual_descend_trigger": "descend_trigger"}[option]
         assert getattr(env, wrapper_flag) and env.scale == 0.5
+        actor = PolicyActor(tmp_path / "model.zip")
+        obs, _ = env.reset(seed=0)
+        action = actor(obs)
+        assert action.shape == env.action_space.shape == ((8,) if option == "residual_descend_trigger" else (7,))
+        env.step(action)
     finally:
         env.close()
     with pytest.raises(ValueError, match=option):
@@ -431,4 +436,13 @@ def test_a_run_cannot_start_from_a_model_of_the_other_observation_layout(ppo_run
     cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, flat_observation=True,
                       init_model=str(out / "model.zip"), out=str(tmp_path), **FAST)
     with pytest.raises(InitModelError, match="dict observations.*flat_observation=False"):
+        train_policy(cfg)
+
+
+def test_a_trigger_residual_cannot_start_from_a_model_without_the_trigger(ppo_run, tmp_path):
+    out, _ = ppo_run  # 7 actions, no trigger
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
+                      normalize=True, total_steps=128, n_steps=128, batch_size=64,
+                      init_model=str(out / "model.zip"), out=str(tmp_path), **FAST)
+    with pytest.raises(InitModelError, match="without the residual's descend trigger.*residual_descend_trigger=False"):
         train_policy(cfg)
