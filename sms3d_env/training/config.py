@@ -216,6 +216,9 @@ class TrainConfig:
             raise bad("residual_descend_trigger", "must be a bool")
         if self.residual_descend_trigger and not self.residual_scale:
             raise bad("residual_descend_trigger", "applies to a residual (residual_scale > 0)")
+        if self.residual_descend_trigger and self.algo != "ppo":
+            raise bad("residual_descend_trigger", "needs algo 'ppo' (the trigger's exploration is set on "
+                                                  "PPO's log standard deviation)")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:

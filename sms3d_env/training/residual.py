@@ -21,9 +21,8 @@ stand-off point, it starts the descent from where the tool is (session 19: under
 error the scripted approach stalls short of its 3 mm / 3 deg tolerance, and a hand-written escape
 from such stalls won 7 of 100 paired episodes at 20 deg; the trigger lets the policy learn when
 to give up on the approach, from what it sees: joint velocities, its command, the tool offset).
-The threshold is 2.5 standard deviations of PPO's initial action noise for a residual (log std
--1.6) above zero: about 0.6 % of steps, so an untrained residual fires it in about 6 % of normal
-approaches (some 11 steps within reach) and in about half of 100-step stalls.
+A policy whose trigger entry has mean 0 (an untrained one, run deterministically) never fires
+it; in training PPO explores it with its own, wider noise (:data:`DESCEND_TRIGGER_LOG_STD_INIT`).
 """
 
 from __future__ import annotations
@@ -38,6 +37,11 @@ from gymnasium import spaces
 DESCEND_TRIGGER = 0.5
 #: How near the stand-off point (m) the trigger acts: the radius of session 19's stall escape.
 DESCEND_TRIGGER_RADIUS_M = 0.02
+#: PPO's initial log standard deviation of the trigger entry (sigma 0.4: above the threshold on
+#: about 11 % of steps). The residual's own entries start at -1.6 (sigma 0.2), where the trigger
+#: would fire on 0.6 % of steps and a stall would rarely be escaped often enough to learn from;
+#: a deterministic policy (the mean, 0 at the start) never fires it until it has learned to.
+DESCEND_TRIGGER_LOG_STD_INIT = -0.9
 
 
 class ResidualPicker(gym.Wrapper):

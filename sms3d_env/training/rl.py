@@ -50,9 +50,17 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
     if cfg.algo == "ppo":
         n_steps = cfg.n_steps
         batch = min(cfg.batch_size, n_steps * cfg.n_envs)
-        return PPO(policy, env, learning_rate=rate, n_steps=n_steps,
-                   batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
-                   seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
+        model = PPO(policy, env, learning_rate=rate, n_steps=n_steps,
+                    batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
+                    seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
+        if cfg.residual_descend_trigger:
+            import torch
+
+            from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT
+
+            with torch.no_grad():
+                model.policy.log_std[7] = DESCEND_TRIGGER_LOG_STD_INIT
+        return model
     return SAC(policy, env, learning_rate=rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
                policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)

@@ -182,10 +182,19 @@ def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option)
         action = actor(obs)
         assert action.shape == env.action_space.shape == ((8,) if option == "residual_descend_trigger" else (7,))
         env.step(action)
+        if option == "residual_descend_trigger":  # the trigger explores wider than the residual
+            from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT
+
+            log_std = actor.model.policy.log_std.detach().numpy()
+            assert log_std[7] == pytest.approx(DESCEND_TRIGGER_LOG_STD_INIT, abs=0.05)
+            assert np.all(np.abs(log_std[:7] - cfg.log_std_init) < 0.05)
     finally:
         env.close()
     with pytest.raises(ValueError, match=option):
         TrainConfig(**{option: True})
+    if option == "residual_descend_trigger":
+        with pytest.raises(ValueError, match="needs algo 'ppo'"):
+            TrainConfig(algo="sac", residual_scale=0.5, residual_descend_trigger=True)
 
 
 def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
