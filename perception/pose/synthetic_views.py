@@ -44,6 +44,10 @@ CAMERA_FROM_WORLD = np.diag([1.0, -1.0, -1.0])
 #: neighbour effects (flying pixels, edge holes) see soil on their far side as in a full image.
 CAMERA_MODEL_MARGIN_PX = 8
 
+#: Every depth effect of ``sms3d generate --realism`` but the invalid band along the image's left
+#: edge: a crop's left edge is not the image's.
+_CROP_CAMERA_MODEL = replace(RealismOptions.all_on(), stereo_shadows_left_band=False)
+
 
 @dataclass(frozen=True)
 class ViewConfig:
@@ -183,7 +187,9 @@ def render_view(model: MeshModel, rng: np.random.Generator, config: ViewConfig |
         m = CAMERA_MODEL_MARGIN_PX
         depth, valid, cap_px = (np.pad(a, m) for a in (depth, valid, cap_px))
         u0, v0 = u0 - m, v0 - m
-        depth = _camera_model_depth(_with_soil(depth, valid, cfg.camera_height), cfg.focal_px, rng)
+        noisy, _ = apply_depth_realism(_with_soil(depth, valid, cfg.camera_height), cfg.focal_px, "d405",
+                                       _CROP_CAMERA_MODEL, rng)
+        depth = noisy.astype(np.float64)
         valid &= depth > 0
     elif cfg.depth_noise_std > 0:
         depth = depth + rng.normal(0.0, cfg.depth_noise_std, depth.shape)
@@ -206,15 +212,6 @@ def _with_soil(depth: np.ndarray, valid: np.ndarray, soil_depth: float) -> np.nd
         nearest = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
         out[gaps] = depth[nearest[0][gaps], nearest[1][gaps]]
     return out
-
-
-def _camera_model_depth(depth: np.ndarray, focal_px: float, rng: np.random.Generator) -> np.ndarray:
-    """``depth`` (a crop with soil behind the mushroom) through every depth effect of the
-    dataset's camera model (D405). The invalid band along the image's left edge is left out: a
-    crop's left edge is not the image's."""
-    options = replace(RealismOptions.all_on(), stereo_shadows_left_band=False)
-    noisy, _ = apply_depth_realism(depth, focal_px, "d405", options, rng)
-    return noisy.astype(np.float64)
 
 
 def generate_samples(

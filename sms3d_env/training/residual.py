@@ -88,8 +88,9 @@ class ResidualPicker(gym.Wrapper):
 
     def _with_base(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         self._base_phase = self.picker.phase
-        view = self.picker.view(obs)
-        self._standoff_gap = float(np.linalg.norm(self.picker.approach_goal(view) - view.p))
+        if self.descend_trigger:  # the gap is read only by the trigger
+            view = self.picker.view(obs)
+            self._standoff_gap = float(np.linalg.norm(self.picker.approach_goal(view) - view.p))
         self._base = self.picker(obs)
         self._held = bool(obs["suction"][1] > 0.5)
         return {**obs, "base_action": self._base}

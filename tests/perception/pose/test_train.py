@@ -253,6 +253,7 @@ def test_gaps_in_the_splat_take_the_mushrooms_depth_not_the_soils() -> None:
     valid = np.zeros((9, 9), bool)
     valid[2:7, 2:7] = True
     valid[4, 4] = False  # a pixel no surface sample hit, inside the mushroom
+    depth[~valid] = np.inf  # as the splat leaves such pixels
     out = _with_soil(depth, valid, soil_depth=0.40)
     assert out[4, 4] == 0.35 and out[0, 0] == 0.40 and (out[valid] == 0.35).all()
 
