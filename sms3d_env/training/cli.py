@@ -165,7 +165,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--residual-descend-trigger", action="store_true",
                    help="--recipe residual: an eighth action entry that, above 0.5 within 2 cm of the stand-off "
                         "point, starts the scripted picker's descent from where the tool is (an escape from "
-                        "approach stalls, learned)")
+                        "approach stalls, learned); the observation gains the stand-off gap and the tool's "
+                        "motion over the last 10 control steps")
     p.add_argument("--log-std-init", type=float, default=None,
                    help="initial log standard deviation of the policy (default 0; -1.6 for --recipe residual)")
     p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)

@@ -23,10 +23,16 @@ from such stalls won 7 of 100 paired episodes at 20 deg; the trigger lets the po
 to give up on the approach, from what it sees: joint velocities, its command, the tool offset).
 A policy whose trigger entry has mean 0 (an untrained one, run deterministically) never fires
 it; in training PPO explores it with its own, wider noise (:data:`DESCEND_TRIGGER_LOG_STD_INIT`).
+With the trigger the observation also gains ``approach_motion``: the tool's distance from the
+stand-off point and how far the tool moved over the last :data:`MOTION_WINDOW_STEPS` control
+steps (session 21: a trigger that saw only this step's joint velocities learned to cut approaches
+short 5-20 mm out rather than to detect a stall, which is "commanding motion and not moving over
+0.4 s"). Both come from the arm's forward kinematics and the estimated pose, as on a real robot.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 import gymnasium as gym
@@ -42,6 +48,9 @@ DESCEND_TRIGGER_RADIUS_M = 0.02
 #: would fire on 0.6 % of steps and a stall would rarely be escaped often enough to learn from;
 #: a deterministic policy (the mean, 0 at the start) never fires it until it has learned to.
 DESCEND_TRIGGER_LOG_STD_INIT = -0.9
+#: Control steps over which ``approach_motion`` measures the tool's displacement: session 19's
+#: stall escape window (0.4 s at the env's 25 Hz control).
+MOTION_WINDOW_STEPS = 10
 
 
 class ResidualPicker(gym.Wrapper):
@@ -55,7 +64,10 @@ class ResidualPicker(gym.Wrapper):
             (excludes ``until_held``, which it implies).
         descend_trigger: an eighth action entry that starts the descent near the stand-off point
             (``info["descend_triggered"]`` is set on the step it does). The descent's travel
-            limit grows by the tool's distance from the stand-off point.
+            limit grows by the tool's distance from the stand-off point. The observation gains
+            ``approach_motion (2,)``: the tool's distance from the stand-off point (m) and its
+            displacement over the last :data:`MOTION_WINDOW_STEPS` control steps (m; since
+            the reset while fewer steps have run).
     """
 
     def __init__(self, env: gym.Env, scale: float = 0.5, until_held: bool = False,
@@ -76,11 +88,12 @@ class ResidualPicker(gym.Wrapper):
         self.scale = float(scale)
         self.until_held, self.approach_only, self.descend_trigger = until_held, approach_only, descend_trigger
         self.picker = ScriptedPicker.for_env(env)
+        extra = {"base_action": spaces.Box(-1.0, 1.0, (7,), np.float32)}
         if descend_trigger:
             self.action_space = spaces.Box(-1.0, 1.0, (8,), np.float32)
-        self.observation_space = spaces.Dict({
-            **env.observation_space.spaces,
-            "base_action": spaces.Box(-1.0, 1.0, (7,), np.float32)})
+            extra["approach_motion"] = spaces.Box(0.0, np.inf, (2,), np.float32)
+        self.observation_space = spaces.Dict({**env.observation_space.spaces, **extra})
+        self._tool_trail: deque[np.ndarray] = deque(maxlen=MOTION_WINDOW_STEPS + 1)
         self._base = np.zeros(7, np.float32)
         self._standoff_gap = 0.0  # m, from the tool to the stand-off point
         self._held = False
@@ -88,16 +101,21 @@ class ResidualPicker(gym.Wrapper):
 
     def _with_base(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         self._base_phase = self.picker.phase
-        if self.descend_trigger:  # the gap is read only by the trigger
+        extra = {}
+        if self.descend_trigger:  # the gap and the motion are read only by the trigger
             view = self.picker.view(obs)
             self._standoff_gap = float(np.linalg.norm(self.picker.approach_goal(view) - view.p))
+            self._tool_trail.append(np.array(view.p, np.float64))
+            moved = float(np.linalg.norm(self._tool_trail[-1] - self._tool_trail[0]))
+            extra["approach_motion"] = np.array([self._standoff_gap, moved], np.float32)
         self._base = self.picker(obs)
         self._held = bool(obs["suction"][1] > 0.5)
-        return {**obs, "base_action": self._base}
+        return {**obs, "base_action": self._base, **extra}
 
     def reset(self, **kwargs: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         self.picker.reset()
+        self._tool_trail.clear()
         return self._with_base(obs), info
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:

@@ -448,6 +448,26 @@ def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
         ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=1)
 
 
+def test_the_descend_trigger_observes_the_stand_off_gap_and_the_tool_motion_over_its_window():
+    from sms3d_env.training.residual import MOTION_WINDOW_STEPS, ResidualPicker
+
+    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=True)
+    assert "approach_motion" not in ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL)).observation_space.spaces
+    obs, _ = env.reset(seed=2)
+    positions = []
+    for _ in range(40):
+        assert env.observation_space.contains(obs)
+        positions.append(ScriptedPicker.view(obs).p.copy())
+        oldest = positions[max(0, len(positions) - 1 - MOTION_WINDOW_STEPS)]
+        gap, moved = obs["approach_motion"]
+        assert gap == pytest.approx(env._standoff_gap, abs=1e-6)
+        assert moved == pytest.approx(np.linalg.norm(positions[-1] - oldest), abs=1e-6)
+        obs, *_ = env.step(np.zeros(8, np.float32))
+    assert obs["approach_motion"][1] > 0.01  # the approach moves the tool centimetres in 0.4 s
+    obs, _ = env.reset(seed=3)
+    assert obs["approach_motion"][1] == 0.0  # a reset forgets the last episode's motion
+
+
 def test_uniform_noisy_pose_errs_within_its_range():
     from sms3d_env.pose_sources import UniformNoisyPose
 
