@@ -26,6 +26,7 @@ import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
+from perception.pointcloud import MIN_POINTS  # noqa: E402
 from perception.pose.estimator import PoseEstimator  # noqa: E402
 from perception.pose.synthetic_views import (  # noqa: E402
     CAMERA_FROM_WORLD,
@@ -42,16 +43,10 @@ FIT_POINTS = 300
 TRANSLATION_STEPS = 6
 
 
-def _posed_mesh(model: MeshModel, seed: int, config: ViewConfig) -> trimesh.Trimesh:
-    """The view's mesh scaled and stretched as ``render_view`` drew it from ``seed``: the same
-    draws in the same order (roll and pitch, yaw, scale, stretch)."""
-    rng = np.random.default_rng(seed)
-    rng.normal(size=2)
-    rng.uniform(0.0, 2 * np.pi)
-    scale = rng.uniform(*config.scale_range)
-    stretch = rng.uniform(*config.stretch_range, size=3)
+def _posed_mesh(model: MeshModel, meta: dict) -> trimesh.Trimesh:
+    """``model``'s mesh scaled and stretched as the view's ``meta`` records it."""
     mesh = model.mesh.copy()
-    mesh.apply_transform(np.diag([*(scale * stretch), 1.0]))
+    mesh.apply_transform(np.diag([*(meta["scale"] * np.asarray(meta["stretch"])), 1.0]))
     return mesh
 
 
@@ -71,22 +66,21 @@ def _axis_error_deg(rotation: np.ndarray, truth: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(rotation[:, 2] @ truth[:, 2], -1.0, 1.0))))
 
 
-def measure(camera_model: bool, views: int, tilts: list[float], seed: int,
+def measure(camera_model: bool, views: int, tilts: list[float], seed: int, models: list[MeshModel],
             estimator: PoseEstimator) -> dict[str, float]:
     """Per tilt the share of views that tell it apart; the network's mean / median axis error."""
     config = ViewConfig(camera_model=camera_model)
-    models = procedural_mesh_models(20, seed=424242)  # shapes no shipped network was trained on
     told_apart: dict[float, list[bool]] = {t: [] for t in tilts}
     network: list[float] = []
     for i in tqdm(range(views), desc=f"camera_model={camera_model}", leave=False):
         model = models[i % len(models)]
         sample = render_view(model, np.random.default_rng(seed + i), config)
-        if len(sample.points) < 64:
+        if len(sample.points) < MIN_POINTS:
             continue
         truth = sample.rotation.astype(np.float64)
         translation = CAMERA_FROM_WORLD @ (np.asarray(sample.meta["position_world"])
                                            - np.array([0.0, 0.0, config.camera_height]))
-        mesh = _posed_mesh(model, seed + i, config)
+        mesh = _posed_mesh(model, sample.meta)
         rng = np.random.default_rng(seed + i + 1)
         points = sample.points.astype(np.float64)
         points = points[rng.choice(len(points), min(FIT_POINTS, len(points)), replace=False)]
@@ -110,11 +104,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=5000)
     args = ap.parse_args(argv)
     estimator = PoseEstimator.from_pretrained(views=8)
+    models = procedural_mesh_models(20, seed=424242)  # shapes no shipped network was trained on
     head = " | ".join(f"tells {t:g}° apart" for t in args.tilts)
     print(f"| depth | views | {head} | shipped network: mean / median axis error |")
     print("| --- | ---: |" + " ---: |" * len(args.tilts) + " --- |")
     for camera_model in (False, True):
-        r = measure(camera_model, args.views, args.tilts, args.seed, estimator)
+        r = measure(camera_model, args.views, args.tilts, args.seed, models, estimator)
         shares = " | ".join(f"{r[f'tilt_{t:g}']:.0%}" for t in args.tilts)
         print(f"| {'camera model (D405)' if camera_model else 'clean'} | {r['views']} | {shares} | "
               f"{r['network_mean']:.1f}° / {r['network_median']:.1f}° |", flush=True)

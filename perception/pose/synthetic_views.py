@@ -165,7 +165,8 @@ def render_view(model: MeshModel, rng: np.random.Generator, config: ViewConfig |
     meta = {
         "model": model.name,
         "roll": float(roll), "pitch": float(pitch), "yaw": float(yaw),
-        "scale": float(scale), "cap_diameter": float(model.cap_diameter * scale * stretch[:2].mean()),
+        "scale": float(scale), "stretch": [float(c) for c in stretch],
+        "cap_diameter": float(model.cap_diameter * scale * stretch[:2].mean()),
         "position_world": [float(c) for c in position],
     }  # fmt: skip
     if len(u) == 0:

@@ -57,6 +57,22 @@ def test_views_are_consistent_with_their_labels(models) -> None:
     assert heights.mean() > 0.3 * heights.max()
 
 
+def test_a_views_metadata_poses_its_mesh_onto_its_points(models) -> None:
+    import trimesh
+
+    s = render_view(models[0], np.random.default_rng(5), ViewConfig(tilt_std_deg=25.0, depth_noise_std=0.0))
+    assert len(s.meta["stretch"]) == 3
+    mesh = models[0].mesh.copy()
+    mesh.apply_transform(np.diag([*(s.meta["scale"] * np.asarray(s.meta["stretch"])), 1.0]))
+    origin = np.diag([1.0, -1.0, -1.0]) @ (np.array(s.meta["position_world"]) - [0, 0, 0.40])
+    _, distance, _ = trimesh.proximity.closest_point(mesh, (s.points - origin) @ s.rotation)
+    assert np.median(distance) < 5e-4  # on the surface but for the pixel grid's quantisation
+    unstretched = models[0].mesh.copy()
+    unstretched.apply_transform(np.diag([s.meta["scale"] * 1.2] * 3 + [1.0]))
+    _, off, _ = trimesh.proximity.closest_point(unstretched, (s.points - origin) @ s.rotation)
+    assert np.median(off) > 2 * np.median(distance)
+
+
 def test_generation_is_deterministic(models) -> None:
     a = generate_samples(3, 7, models, FAST_VIEWS)
     b = generate_samples(3, 7, models, FAST_VIEWS)
