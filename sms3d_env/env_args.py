@@ -15,6 +15,7 @@ from sms3d_env.targets import RULES
 SUCTION_MODES = ("momentary", "latched")
 POSTURE_TARGETS = ("estimate", "tool")
 REWARD_POSES = ("estimate", "truth")
+SUCCESS_PAYOFFS = ("time_left", "fixed")
 RENDER_MODES = ("rgb_array", "depth_array")
 
 
@@ -38,7 +39,8 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
                    pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
                    image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
                    scene_config: Any, posture_target: Any = "estimate", pregrasp_start: Any = 0.0,
-                   reach_lateral_weight: Any = 1.0, reward_pose: Any = "estimate") -> None:
+                   reach_lateral_weight: Any = 1.0, reward_pose: Any = "estimate",
+                   success_payoff: Any = "time_left") -> None:
     """Every check of the env's keyword arguments that needs no model (``tool`` is the resolved
     tool, ``robot.tool`` or the ``tool`` argument)."""
     if render_mode is not None and render_mode not in RENDER_MODES:
@@ -65,6 +67,11 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
     if reward_pose != "estimate" and reward_type == "sparse":
         raise ValueError("reward_pose shapes the dense and staged rewards; the sparse reward has no "
                          "approach term it could change")
+    if success_payoff not in SUCCESS_PAYOFFS:
+        raise ValueError(f"success_payoff must be one of {SUCCESS_PAYOFFS}, got {success_payoff!r}")
+    if success_payoff != "time_left" and reward_type != "staged":
+        raise ValueError(f"success_payoff sets the staged reward's success bonus; with reward_type="
+                         f"{reward_type!r} it would be ignored (got {success_payoff!r})")
     _int_at_least("horizon", horizon, 1)
     _int_at_least("scene_pool", scene_pool)
     _int_at_least("pool_seed", pool_seed)

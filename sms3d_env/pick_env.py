@@ -91,7 +91,8 @@ class SMS3DPickEnv(gym.Env):
     ``"dense"`` (default), ``"sparse"`` (0 on success, −1 otherwise) or ``"staged"`` (bounded per
     step, maximal at success; terms in ``info["reward_stage"|"reward_progress"|"reward_success_bonus"]``),
     see :mod:`sms3d_env.rewards`. Their approach terms pull towards the estimated pose
-    (``reward_pose="truth"``: towards the true one).
+    (``reward_pose="truth"``: towards the true one); the staged success bonus is the steps left
+    (``success_payoff="fixed"``: the horizon, whenever the success comes).
 
     ## Episode end
     | | when |
@@ -165,6 +166,13 @@ class SMS3DPickEnv(gym.Env):
             wrist wrench at touch-down reveals it) costs reward until it seals; shaped towards
             the truth, it pays. The reward is simulation-side (like the root load in the staged
             reward): the observation stays the same either way.
+        success_payoff: the staged reward's success bonus: ``"time_left"`` (default) the
+            control steps left until ``horizon`` (the return of holding the per-step maximum to
+            the time limit: every step saved adds to every success's payoff); ``"fixed"`` always
+            ``horizon``, a success's payoff whenever it comes (still never less than loitering in
+            a stage below it), so that only the discount, not the bonus, pays for haste: a
+            training option for decisions that trade time against success, such as when to start
+            a descent. Refused with another reward.
 
     ``SMS3DPickTrain-v0`` sets the training options: ``suction_mode="latched"``,
     ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
@@ -205,6 +213,7 @@ class SMS3DPickEnv(gym.Env):
         pregrasp_start: float = 0.0,
         reach_lateral_weight: float = 1.0,
         reward_pose: str = "estimate",
+        success_payoff: str = "time_left",
     ) -> None:
         self.robot_cfg = robot or RobotConfig()
         check_env_args(render_mode=render_mode, reward_type=reward_type, control_dt=control_dt,
@@ -215,7 +224,8 @@ class SMS3DPickEnv(gym.Env):
                        render_size=render_size, max_tilt_deg=max_tilt_deg, free_radius=free_radius,
                        scene_config=scene_config, posture_target=posture_target,
                        pregrasp_start=pregrasp_start,
-                       reach_lateral_weight=reach_lateral_weight, reward_pose=reward_pose)
+                       reach_lateral_weight=reach_lateral_weight, reward_pose=reward_pose,
+                       success_payoff=success_payoff)
         if tool is not None:
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
@@ -224,7 +234,7 @@ class SMS3DPickEnv(gym.Env):
         self.pose_source = make_pose_source(pose_source, pose_error_deg, position_noise)
         self.target_rule, self.target_index = target_rule, target_index
         self.reward_type, self.reach_lateral_weight = reward_type, float(reach_lateral_weight)
-        self.reward_pose = reward_pose
+        self.reward_pose, self.success_payoff = reward_pose, success_payoff
         self.params = physics or PickPhysicsParams(cup_radius=self.robot_cfg.cup_radius)
         self.ctrl_cfg = controller or ControllerConfig()
         self.control_dt, self.substeps = float(control_dt), substeps
@@ -407,7 +417,8 @@ class SMS3DPickEnv(gym.Env):
             gripped_target=ep.grip == ep.target, target_detached=ep.target_detached,
             lift=self.picking.lift(), lift_goal=self.params.lift_height, success=success,
             bruised=bool(ep.bruised), root_utilisation=ep.root_util,
-            steps_left=self.horizon - self.steps, lateral_weight=self.reach_lateral_weight)
+            steps_left=self.horizon - (self.steps if self.success_payoff == "time_left" else 0),
+            lateral_weight=self.reach_lateral_weight)
         if self.reward_type == "staged":
             terms = reward_terms(s)
             return sum(terms.values()), terms

@@ -40,7 +40,7 @@ class RewardState:
     success: bool
     bruised: bool
     root_utilisation: float = 0.0  # target root load / its detachment capacity (>= 1 detaches)
-    steps_left: int = 0  # control steps until the time limit (the staged success bonus)
+    steps_left: int = 0  # the staged success bonus: control steps until the time limit (or all of them)
     lateral_weight: float = 1.0  # staged reach: weight of the offset across the goal axis
 
 
@@ -90,7 +90,8 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     cap top alike); align = 1 - tanh(3/rad x angle between the cup axis and the goal stem axis,
     reversed). Per step the reward is at most 1, reached only at success; the success step
     also pays ``steps_left`` (the return of holding that maximum until the time limit), so
-    finishing early is never worth less than loitering in a stage below it. A bruise pays 0 (it ends the episode). The root load is
+    finishing early is never worth less than loitering in a stage below it (the env's
+    ``success_payoff="fixed"`` passes the whole horizon instead, whenever the success comes). A bruise pays 0 (it ends the episode). The root load is
     privileged simulation state; it shapes the reward only and is never observed.
     """
     if s.bruised:

@@ -15,6 +15,7 @@ from sms3d_env.training.config import (
     RECIPES,
     REWARD_POSES,
     REWARD_TYPES,
+    SUCCESS_PAYOFFS,
     VEC_ENVS,
     TrainConfig,
 )
@@ -57,7 +58,8 @@ def _cmd_train(args: Any) -> int:
                           target_kl=args.target_kl, posture_target=args.posture_target,
                           pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
                           reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model,
-                          critic_warmup_steps=args.critic_warmup_steps, reward_pose=args.reward_pose)
+                          critic_warmup_steps=args.critic_warmup_steps, reward_pose=args.reward_pose,
+                          success_payoff=args.success_payoff, gamma=args.gamma)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -85,6 +87,8 @@ def _cmd_train_bc(args: Any) -> int:
                "--residual-descend-trigger": (args.residual_descend_trigger, "it trains no residual"),
                "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic"),
                "--reward-pose": (args.reward_pose != "estimate", "it is trained on actions, not rewards"),
+               "--success-payoff": (args.success_payoff != "time_left", "it is trained on actions, not rewards"),
+               "--gamma": (args.gamma != TrainConfig().gamma, "it is trained on actions, not rewards"),
                "--normalize-reward": (args.normalize_reward, "it is trained on actions, not rewards"),
                "--vec-env": (args.vec_env != "subproc", "it collects its demonstrations in one env"),
                "--flat-observation": (args.flat_observation, "it clones a MultiInputPolicy")}
@@ -194,6 +198,12 @@ def register(subparsers: Any) -> None:
                    help="rl/residual: the pose the reward's approach terms pull towards: estimate (default, the "
                         "observed one) or truth (the true pose; for training under pose error, so that "
                         "correcting a wrong estimate pays; the observation is the same)")
+    p.add_argument("--success-payoff", choices=SUCCESS_PAYOFFS, default=defaults.success_payoff,
+                   help="rl/residual, staged reward: the success step's bonus: time_left (default, the steps left "
+                        "to the time limit: every step saved pays) or fixed (the whole horizon, whenever the "
+                        "success comes: with --gamma near 1 the return ranks by success, not speed)")
+    p.add_argument("--gamma", type=float, default=defaults.gamma,
+                   help="rl/residual: the discount factor (default %(default)s)")
     p.add_argument("--init-model", default=None, metavar="PATH",
                    help="rl/residual: start from this saved model (model.zip, a checkpoint or best/best_model.zip; "
                         "its observation statistics too with --normalize) instead of a fresh policy")

@@ -15,6 +15,7 @@ RECIPES = ("rl", "bc", "residual")
 VEC_ENVS = ("subproc", "dummy")
 POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.env_args.POSTURE_TARGETS (kept free of scipy here)
 REWARD_POSES = ("estimate", "truth")  # = sms3d_env.env_args.REWARD_POSES
+SUCCESS_PAYOFFS = ("time_left", "fixed")  # = sms3d_env.env_args.SUCCESS_PAYOFFS
 
 
 def env_options(posture_target: str = "estimate") -> dict[str, Any]:
@@ -109,6 +110,10 @@ class TrainConfig:
             ``reward_pose``): ``"estimate"`` (default) or ``"truth"`` (for pickers trained under
             pose error: a correction towards the true axis pays). Training envs only; the
             observation is the same either way.
+        success_payoff: the staged reward's success bonus (the env's ``success_payoff``):
+            ``"time_left"`` (default, grows with every step saved) or ``"fixed"`` (the horizon,
+            whenever the success comes; with ``gamma`` near 1 the return then ranks behaviours
+            by how often they succeed rather than how fast). Needs the staged reward.
         init_model: a saved model of this algorithm and architecture (``model.zip``, a checkpoint,
             ``best/best_model.zip``) whose weights, and with ``normalize`` observation
             statistics, the run starts from instead of a fresh policy (e.g. a second phase at a
@@ -161,6 +166,7 @@ class TrainConfig:
     pregrasp_anneal: bool = False
     reach_lateral_weight: float = 1.0
     reward_pose: str = "estimate"
+    success_payoff: str = "time_left"
     init_model: str | None = None
     critic_warmup_steps: int = 0
     batch_size: int = 256
@@ -278,6 +284,11 @@ class TrainConfig:
             raise bad("reward_pose", f"must be one of {REWARD_POSES}")
         if self.reward_pose != "estimate" and self.env_id == "SMS3DPick-v0" and self.reward_type == "sparse":
             raise bad("reward_pose", "shapes the dense and staged rewards; the sparse reward has none")
+        if self.success_payoff not in SUCCESS_PAYOFFS:
+            raise bad("success_payoff", f"must be one of {SUCCESS_PAYOFFS}")
+        if self.success_payoff != "time_left" and self.env_id == "SMS3DPick-v0" and self.reward_type != "staged":
+            raise bad("success_payoff", "sets the staged reward's success bonus (use SMS3DPickTrain-v0 or "
+                                        "reward_type='staged')")
         if self.init_model is not None and not (isinstance(self.init_model, str) and self.init_model):
             raise bad("init_model", "must be None or the path of a saved model")
         if self.init_model is not None and self.algo != "ppo":
@@ -316,6 +327,8 @@ class TrainConfig:
             kw["reach_lateral_weight"] = float(self.reach_lateral_weight)
         if self.reward_pose != "estimate":
             kw["reward_pose"] = self.reward_pose
+        if self.success_payoff != "time_left":
+            kw["success_payoff"] = self.success_payoff
         kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale,
                 "residual_until_held": self.residual_until_held,

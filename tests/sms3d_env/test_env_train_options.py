@@ -158,8 +158,11 @@ def test_reward_pose_truth_is_the_default_reward_when_the_pose_is_exact():
     assert rewards["truth"] == rewards["estimate"]
 
 
-def test_scripted_success_is_reported_with_reward_terms():
-    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+@pytest.mark.parametrize("payoff", ["time_left", "fixed"])
+def test_scripted_success_is_reported_with_reward_terms(payoff):
+    """The success step pays the steps left, or with ``success_payoff="fixed"`` the whole horizon
+    (the same bed, the same picks: only the last reward differs)."""
+    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL, success_payoff=payoff)
     picker = ScriptedPicker.for_env(env)
     obs, _ = env.reset(seed=1)
     done, rewards = False, []
@@ -169,8 +172,8 @@ def test_scripted_success_is_reported_with_reward_terms():
         done = terminated or truncated
     assert info["is_success"] and terminated
     assert info["reward_stage"] == 1.0
-    assert info["reward_success_bonus"] == 250 - len(rewards)
-    assert max(rewards[:-1]) < 1.0 and rewards[-1] == 1.0 + info["reward_success_bonus"]
+    assert info["reward_success_bonus"] == (250 - len(rewards) if payoff == "time_left" else 250)
+    assert len(rewards) > 1 and max(rewards[:-1]) < 1.0 and rewards[-1] == 1.0 + info["reward_success_bonus"]
 
 
 def _nearest_neighbour_pose(scene, i, rng):
@@ -280,6 +283,8 @@ BAD_ARGS = [
     ({"reward_type": "staged", "reach_lateral_weight": float("nan")}, "reach_lateral_weight"),
     ({"reward_pose": "oracle"}, "reward_pose"),
     ({"reward_type": "sparse", "reward_pose": "truth"}, "reward_pose"),
+    ({"reward_type": "staged", "success_payoff": "at_once"}, "success_payoff"),
+    ({"reward_type": "dense", "success_payoff": "fixed"}, "success_payoff"),  # no success bonus
 ]
 
 

@@ -111,6 +111,9 @@ def test_sac_short_run(tmp_path):
     ({"residual_approach_only": True}, "residual_approach_only"),  # no residual
     ({"residual_scale": 0.5, "residual_approach_only": True, "residual_until_held": True}, "residual_approach_only"),
     ({"reward_type": "sparse", "reward_pose": "truth"}, "reward_pose"),  # nothing to shape
+    ({"success_payoff": "at_once"}, "success_payoff"),
+    ({"success_payoff": "fixed"}, "success_payoff"),  # the dense reward has no success bonus
+    ({"gamma": 0.0}, "gamma"),
     ({"vec_env": "threads"}, "vec_env"),
     ({"flat_observation": 1}, "flat_observation"),
 ])
@@ -135,12 +138,12 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
     from sms3d_env.training.actor import PolicyActor
 
     cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, target_kl=0.01,
-                      posture_target="tool", learning_rate=1e-4, out=str(tmp_path),
+                      posture_target="tool", learning_rate=1e-4, gamma=0.999, out=str(tmp_path),
                       **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
     assert cfg.env_kwargs()["posture_target"] == "tool"
     train_policy(cfg)
     model = PPO.load(str(tmp_path / "model.zip"), device="cpu")
-    assert model.target_kl == 0.01 and model.learning_rate == 1e-4
+    assert model.target_kl == 0.01 and model.learning_rate == 1e-4 and model.gamma == 0.999
     assert PolicyActor(tmp_path / "model.zip").env_options == {"posture_target": "tool"}
     assert "posture_target" not in TrainConfig().env_kwargs()
 
@@ -149,6 +152,16 @@ def test_the_reach_funnel_reaches_the_training_env():
     kw = TrainConfig(env_id="SMS3DPickTrain-v0", reach_lateral_weight=3.0).env_kwargs()
     assert kw["reach_lateral_weight"] == 3.0
     assert "reach_lateral_weight" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
+
+
+def test_the_success_payoff_reaches_the_training_env_only():
+    from sms3d_env.env_args import SUCCESS_PAYOFFS
+
+    assert training_config.SUCCESS_PAYOFFS == SUCCESS_PAYOFFS
+    cfg = TrainConfig(env_id="SMS3DPickTrain-v0", success_payoff="fixed")
+    assert cfg.env_kwargs()["success_payoff"] == "fixed"
+    assert "success_payoff" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
+    assert "success_payoff" not in training_config.env_options(cfg.posture_target)  # evaluation: the default
 
 
 def test_the_reward_pose_reaches_the_training_env_only():
@@ -252,7 +265,8 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
                                   ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
                                   ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"],
                                   ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"],
-                                  ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"]],
+                                  ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"],
+                                  ["--success-payoff", "fixed"], ["--gamma", "0.999"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
