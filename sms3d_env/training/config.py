@@ -68,6 +68,11 @@ class TrainConfig:
         residual_descend_trigger: the residual's action gains an entry that starts the scripted
             picker's descent near the stand-off point (``ResidualPicker(descend_trigger=True)``).
             Needs ``residual_scale`` > 0.
+        trigger_log_std: the log standard deviation of that entry's exploration noise; ``None``
+            (default): ``DESCEND_TRIGGER_LOG_STD_INIT`` (-0.9) for a fresh policy, an
+            ``init_model``'s own otherwise. Lower, a stochastic policy fires less often by chance,
+            so that not firing in a stall costs the episode (session 23). Needs
+            ``residual_descend_trigger``.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
             uniformly in that range (``pose_source`` must then be ``"noisy"`` and
             ``pose_error_deg`` 0).
@@ -140,6 +145,7 @@ class TrainConfig:
     residual_until_held: bool = False
     residual_approach_only: bool = False
     residual_descend_trigger: bool = False
+    trigger_log_std: float | None = None
     pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
     max_wall_s: float | None = None
@@ -225,6 +231,13 @@ class TrainConfig:
         if self.residual_descend_trigger and self.algo != "ppo":
             raise bad("residual_descend_trigger", "needs algo 'ppo' (the trigger's exploration is set on "
                                                   "PPO's log standard deviation)")
+        if self.trigger_log_std is not None:
+            if not self.residual_descend_trigger:
+                raise bad("trigger_log_std", "sets the descend trigger's exploration (needs "
+                                             "residual_descend_trigger)")
+            if isinstance(self.trigger_log_std, bool) or not isinstance(self.trigger_log_std, (int, float)) \
+                    or not math.isfinite(self.trigger_log_std):
+                raise bad("trigger_log_std", "must be a finite number")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:

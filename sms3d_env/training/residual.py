@@ -47,6 +47,9 @@ DESCEND_TRIGGER_RADIUS_M = 0.02
 #: about 11 % of steps). The residual's own entries start at -1.6 (sigma 0.2), where the trigger
 #: would fire on 0.6 % of steps and a stall would rarely be escaped often enough to learn from;
 #: a deterministic policy (the mean, 0 at the start) never fires it until it has learned to.
+#: Session 23: at 0.4 a stochastic policy escapes every stall by chance within a few steps, so
+#: firing at once in a stall earns little and the mean stays below the threshold; ``sms3d
+#: train-policy --trigger-log-std`` sets it lower.
 DESCEND_TRIGGER_LOG_STD_INIT = -0.9
 #: Control steps over which ``approach_motion`` measures the tool's displacement: session 19's
 #: stall escape window (0.4 s at the env's 25 Hz control).

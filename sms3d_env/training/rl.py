@@ -53,13 +53,6 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
         model = PPO(policy, env, learning_rate=rate, n_steps=n_steps,
                     batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
                     seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
-        if cfg.residual_descend_trigger:
-            import torch
-
-            from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT
-
-            with torch.no_grad():
-                model.policy.log_std[7] = DESCEND_TRIGGER_LOG_STD_INIT
         return model
     return SAC(policy, env, learning_rate=rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
@@ -100,6 +93,20 @@ def _check_init_model(cfg: TrainConfig) -> None:
     if not cfg.normalize and stats is not None:
         raise InitModelError(f"TrainConfig.init_model: {path} was trained on normalised observations "
                              f"({stats.name}); set normalize=True (--normalize) to start from it")
+
+
+def _set_trigger_exploration(model: Any, cfg: TrainConfig) -> None:
+    """The descend trigger's log standard deviation (action entry 7): ``cfg.trigger_log_std``, or
+    for a fresh policy ``DESCEND_TRIGGER_LOG_STD_INIT`` (an ``init_model`` keeps its own)."""
+    if not cfg.residual_descend_trigger or (cfg.trigger_log_std is None and cfg.init_model is not None):
+        return
+    import torch
+
+    from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT
+
+    value = DESCEND_TRIGGER_LOG_STD_INIT if cfg.trigger_log_std is None else cfg.trigger_log_std
+    with torch.no_grad():
+        model.policy.log_std[7] = value
 
 
 def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:
@@ -204,6 +211,7 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
         model = _build_model(cfg, env)
         if cfg.init_model is not None:
             _start_from(model, env, cfg)
+        _set_trigger_exploration(model, cfg)
         formats = ["stdout", "csv"] + (["tensorboard"] if _tensorboard_available() else [])
         if not cfg.verbose:
             formats.remove("stdout")

@@ -210,6 +210,30 @@ def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option)
             TrainConfig(algo="sac", residual_scale=0.5, residual_descend_trigger=True)
 
 
+def test_the_trigger_exploration_is_set_fresh_and_on_a_continuation_only_when_asked(tmp_path):
+    """``trigger_log_std`` sets the trigger entry's noise of a fresh policy and of one continued
+    from ``init_model``; left at None, a continuation keeps the saved policy's own."""
+    from stable_baselines3 import PPO
+
+    def run(name, **kw):
+        cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
+                          normalize=True, total_steps=64, n_steps=64, batch_size=64, out=str(tmp_path / name),
+                          learning_rate=1e-12, **{**FAST, "eval_freq": 0, "checkpoint_freq": 0}, **kw)
+        train_policy(cfg)
+        return PPO.load(str(tmp_path / name / "model.zip"), device="cpu").policy.log_std.detach().numpy()
+
+    fresh = run("fresh", trigger_log_std=-1.6)
+    assert fresh[7] == pytest.approx(-1.6, abs=1e-3)
+    kept = run("kept", init_model=str(tmp_path / "fresh" / "model.zip"))
+    assert kept[7] == pytest.approx(-1.6, abs=1e-3)
+    assert run("set", init_model=str(tmp_path / "fresh" / "model.zip"), trigger_log_std=-2.5)[7] == pytest.approx(
+        -2.5, abs=1e-3)
+    with pytest.raises(ValueError, match="TrainConfig.trigger_log_std"):
+        TrainConfig(residual_scale=0.5, trigger_log_std=-1.6)  # no trigger
+    with pytest.raises(ValueError, match="TrainConfig.trigger_log_std"):
+        TrainConfig(residual_scale=0.5, residual_descend_trigger=True, trigger_log_std=float("nan"))
+
+
 def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
     """The training envs start a share of their episodes on the way to a pre-grasp pose; the
     periodic evaluation and every later evaluation of the saved policy start at home."""
@@ -266,7 +290,7 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
                                   ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"],
                                   ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"],
                                   ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"],
-                                  ["--success-payoff", "fixed"], ["--gamma", "0.999"]],
+                                  ["--success-payoff", "fixed"], ["--gamma", "0.999"], ["--trigger-log-std", "-1.6"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
