@@ -44,7 +44,7 @@ def _cmd_train(args: Any) -> int:
                           residual_until_held=args.residual_until_held,
                           residual_approach_only=args.residual_approach_only,
                           residual_descend_trigger=args.residual_descend_trigger,
-                          trigger_log_std=args.trigger_log_std,
+                          trigger_log_std=args.trigger_log_std, trigger_log_std_final=args.trigger_log_std_final,
                           pose_error_range_deg=args.pose_error_range,
                           log_std_init=args.log_std_init if args.log_std_init is not None
                           else (-1.6 if residual else 0.0),
@@ -87,6 +87,7 @@ def _cmd_train_bc(args: Any) -> int:
                "--residual-approach-only": (args.residual_approach_only, "it trains no residual"),
                "--residual-descend-trigger": (args.residual_descend_trigger, "it trains no residual"),
                "--trigger-log-std": (args.trigger_log_std is not None, "it trains no residual"),
+               "--trigger-log-std-final": (args.trigger_log_std_final is not None, "it trains no residual"),
                "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic"),
                "--reward-pose": (args.reward_pose != "estimate", "it is trained on actions, not rewards"),
                "--success-payoff": (args.success_payoff != "time_left", "it is trained on actions, not rewards"),
@@ -177,6 +178,10 @@ def register(subparsers: Any) -> None:
                    help="--residual-descend-trigger: the log standard deviation of the trigger's exploration "
                         "(default -0.9 for a fresh policy, an --init-model's own otherwise; lower: fewer chance "
                         "firings, so hesitating in a stall costs the episode)")
+    p.add_argument("--trigger-log-std-final", type=float, default=None, metavar="LOG_STD",
+                   help="--residual-descend-trigger: move the trigger's log standard deviation from "
+                        "--trigger-log-std to this over the run (by steps or --max-wall-s, whichever ends first), "
+                        "so that what the noisy policy fires by chance becomes what its mean fires")
     p.add_argument("--log-std-init", type=float, default=None,
                    help="initial log standard deviation of the policy (default 0; -1.6 for --recipe residual)")
     p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)

@@ -73,6 +73,11 @@ class TrainConfig:
             ``init_model``'s own otherwise. Lower, a stochastic policy fires less often by chance,
             so that not firing in a stall costs the episode (session 23). Needs
             ``residual_descend_trigger``.
+        trigger_log_std_final: move that log standard deviation on a line from
+            ``trigger_log_std`` (needed) to this over the run (by steps, or by whichever of steps
+            and ``max_wall_s`` runs out first), so that the trigger the policy learned by chance
+            becomes the one its deterministic mean fires (:func:`~sms3d_env.training.schedules.
+            trigger_noise_schedule`). ``None`` (default): a constant noise.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
             uniformly in that range (``pose_source`` must then be ``"noisy"`` and
             ``pose_error_deg`` 0).
@@ -146,6 +151,7 @@ class TrainConfig:
     residual_approach_only: bool = False
     residual_descend_trigger: bool = False
     trigger_log_std: float | None = None
+    trigger_log_std_final: float | None = None
     pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
     max_wall_s: float | None = None
@@ -238,6 +244,12 @@ class TrainConfig:
             if isinstance(self.trigger_log_std, bool) or not isinstance(self.trigger_log_std, (int, float)) \
                     or not math.isfinite(self.trigger_log_std):
                 raise bad("trigger_log_std", "must be a finite number")
+        if self.trigger_log_std_final is not None:
+            if self.trigger_log_std is None:
+                raise bad("trigger_log_std_final", "ends a schedule that starts at trigger_log_std (set it too)")
+            if isinstance(self.trigger_log_std_final, bool) or not isinstance(self.trigger_log_std_final, (int, float)) \
+                    or not math.isfinite(self.trigger_log_std_final):
+                raise bad("trigger_log_std_final", "must be a finite number")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:

@@ -24,7 +24,7 @@ from sms3d_env.training.actor import VECNORM_FILE, observation_stats_path, saved
 from sms3d_env.training.config import TrainConfig, env_options
 from sms3d_env.training.curriculum import pregrasp_annealing
 from sms3d_env.training.envs import normalized, vec_env
-from sms3d_env.training.schedules import WallAwareLinearSchedule
+from sms3d_env.training.schedules import WallAwareLinearSchedule, trigger_noise_schedule
 from sms3d_env.training.warmup import critic_warmup
 
 
@@ -238,6 +238,8 @@ def _train(cfg: TrainConfig) -> dict[str, Any]:
             callbacks.append(pregrasp_annealing(cfg.pregrasp_start))
         if cfg.critic_warmup_steps:
             callbacks.append(critic_warmup(cfg.critic_warmup_steps))
+        if cfg.trigger_log_std_final is not None:
+            callbacks.append(trigger_noise_schedule(cfg.trigger_log_std, cfg.trigger_log_std_final, cfg.max_wall_s))
         if cfg.max_wall_s is not None:
             callbacks.append(_wall_clock_callback(cfg.max_wall_s))
         t0 = time.perf_counter()

@@ -1,4 +1,5 @@
-"""Learning-rate schedules for runs that a wall-clock limit may stop before their last step.
+"""Schedules for runs that a wall-clock limit may stop before their last step: the learning rate,
+and the descend trigger's exploration noise.
 
 SB3 drives a schedule by ``progress_remaining``, the share of ``total_steps`` still to run. A run
 stopped by ``max_wall_s`` never sees the end of that schedule: measured (benchmarks/RESULTS.md,
@@ -11,6 +12,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from typing import Any
 
 
 class WallAwareLinearSchedule:
@@ -52,3 +54,35 @@ class WallAwareLinearSchedule:
     def __getstate__(self) -> dict:
         # One process's clock means nothing in another (and a test's fake clock may not pickle).
         return {**self.__dict__, "_t0": None, "clock": time.perf_counter}
+
+
+def trigger_noise_schedule(start: float, end: float, max_wall_s: float | None) -> Any:
+    """An SB3 callback: before each rollout, set the descend trigger's log standard deviation
+    (action entry 7 of a PPO policy) on a line from ``start`` to ``end`` over the run (by steps, or
+    with ``max_wall_s`` over whichever runs out first, as :class:`WallAwareLinearSchedule`), and
+    log it as ``train/trigger_log_std``.
+
+    Why (benchmarks/RESULTS.md, session 23): a thresholded trigger trained at a fixed noise learns
+    to fire *by chance* in a stall, with a mean held about 1.5 standard deviations below the
+    threshold, so the deterministic policy never fires; shrinking the noise moves the mean up to
+    the threshold, where the stochastic and the deterministic policies agree.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.utils import LinearSchedule
+
+    schedule: Callable[[float], float] = (LinearSchedule(start, end, end_fraction=1.0) if max_wall_s is None
+                                          else WallAwareLinearSchedule(start, end, max_wall_s))
+
+    class _TriggerNoise(BaseCallback):
+        def _on_rollout_start(self) -> None:
+            import torch
+
+            value = float(schedule(self.model._current_progress_remaining))
+            with torch.no_grad():
+                self.model.policy.log_std[7] = value
+            self.logger.record("train/trigger_log_std", value)
+
+        def _on_step(self) -> bool:
+            return True
+
+    return _TriggerNoise()

@@ -212,12 +212,14 @@ def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option)
 
 def test_the_trigger_exploration_is_set_fresh_and_on_a_continuation_only_when_asked(tmp_path):
     """``trigger_log_std`` sets the trigger entry's noise of a fresh policy and of one continued
-    from ``init_model``; left at None, a continuation keeps the saved policy's own."""
+    from ``init_model``; left at None, a continuation keeps the saved policy's own;
+    ``trigger_log_std_final`` moves it along the run."""
     from stable_baselines3 import PPO
 
     def run(name, **kw):
+        kw = {"total_steps": 64, **kw}
         cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
-                          normalize=True, total_steps=64, n_steps=64, batch_size=64, out=str(tmp_path / name),
+                          normalize=True, n_steps=64, batch_size=64, out=str(tmp_path / name),
                           learning_rate=1e-12, **{**FAST, "eval_freq": 0, "checkpoint_freq": 0}, **kw)
         train_policy(cfg)
         return PPO.load(str(tmp_path / name / "model.zip"), device="cpu").policy.log_std.detach().numpy()
@@ -228,6 +230,11 @@ def test_the_trigger_exploration_is_set_fresh_and_on_a_continuation_only_when_as
     assert kept[7] == pytest.approx(-1.6, abs=1e-3)
     assert run("set", init_model=str(tmp_path / "fresh" / "model.zip"), trigger_log_std=-2.5)[7] == pytest.approx(
         -2.5, abs=1e-3)
+    # A schedule over two rollouts of 64 steps: the second one runs half way along it.
+    scheduled = run("scheduled", total_steps=128, trigger_log_std=-1.6, trigger_log_std_final=-3.0)
+    assert scheduled[7] == pytest.approx(-2.3, abs=1e-3)
+    with pytest.raises(ValueError, match="TrainConfig.trigger_log_std_final"):
+        TrainConfig(residual_scale=0.5, residual_descend_trigger=True, trigger_log_std_final=-3.0)
     with pytest.raises(ValueError, match="TrainConfig.trigger_log_std"):
         TrainConfig(residual_scale=0.5, trigger_log_std=-1.6)  # no trigger
     with pytest.raises(ValueError, match="TrainConfig.trigger_log_std"):
@@ -290,7 +297,8 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
                                   ["--learning-rate-by-wall"], ["--residual-until-held"], ["--reach-lateral-weight", "3"],
                                   ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"],
                                   ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"],
-                                  ["--success-payoff", "fixed"], ["--gamma", "0.999"], ["--trigger-log-std", "-1.6"]],
+                                  ["--success-payoff", "fixed"], ["--gamma", "0.999"], ["--trigger-log-std", "-1.6"],
+                                  ["--trigger-log-std-final", "-3"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
