@@ -50,10 +50,9 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
     if cfg.algo == "ppo":
         n_steps = cfg.n_steps
         batch = min(cfg.batch_size, n_steps * cfg.n_envs)
-        model = PPO(policy, env, learning_rate=rate, n_steps=n_steps,
-                    batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
-                    seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
-        return model
+        return PPO(policy, env, learning_rate=rate, n_steps=n_steps,
+                   batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
+                   seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
     return SAC(policy, env, learning_rate=rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
                policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
