@@ -91,8 +91,9 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     reversed). Per step the reward is at most 1, reached only at success; the success step
     also pays ``steps_left`` (the return of holding that maximum until the time limit), so
     finishing early is never worth less than loitering in a stage below it (the env's
-    ``success_payoff="fixed"`` passes the whole horizon instead, whenever the success comes). A bruise pays 0 (it ends the episode). The root load is
-    privileged simulation state; it shapes the reward only and is never observed.
+    ``success_payoff="fixed"`` passes the whole horizon instead, whenever the success comes).
+    A bruise pays 0 (it ends the episode). The root load is privileged simulation state; it
+    shapes the reward only and is never observed.
     """
     if s.bruised:
         return {"stage": 0.0, "progress": 0.0, "success_bonus": 0.0}
