@@ -32,6 +32,7 @@ from perception.pose.synthetic_views import (  # noqa: E402
     CAMERA_FROM_WORLD,
     MeshModel,
     ViewConfig,
+    posed_mesh,
     procedural_mesh_models,
     render_view,
 )
@@ -41,13 +42,6 @@ FIT_POINTS = 300
 #: Translation re-fits per rotation (each: the mean offset of the points from their closest
 #: mesh points).
 TRANSLATION_STEPS = 6
-
-
-def _posed_mesh(model: MeshModel, meta: dict) -> trimesh.Trimesh:
-    """``model``'s mesh scaled and stretched as the view's ``meta`` records it."""
-    mesh = model.mesh.copy()
-    mesh.apply_transform(np.diag([*(meta["scale"] * np.asarray(meta["stretch"])), 1.0]))
-    return mesh
 
 
 def fit_rms(mesh: trimesh.Trimesh, points: np.ndarray, rotation: np.ndarray, translation: np.ndarray) -> float:
@@ -80,7 +74,7 @@ def measure(camera_model: bool, views: int, tilts: list[float], seed: int, model
         truth = sample.rotation.astype(np.float64)
         translation = CAMERA_FROM_WORLD @ (np.asarray(sample.meta["position_world"])
                                            - np.array([0.0, 0.0, config.camera_height]))
-        mesh = _posed_mesh(model, sample.meta)
+        mesh = posed_mesh(model, sample.meta)
         rng = np.random.default_rng(seed + i + 1)
         points = sample.points.astype(np.float64)
         points = points[rng.choice(len(points), min(FIT_POINTS, len(points)), replace=False)]

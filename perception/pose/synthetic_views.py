@@ -133,6 +133,15 @@ def _surface(mesh_id: int, mesh: trimesh.Trimesh, n: int) -> tuple[np.ndarray, n
     return np.asarray(pts), np.asarray(mesh.face_normals[face])
 
 
+def posed_mesh(model: MeshModel, meta: dict) -> trimesh.Trimesh:
+    """``model``'s mesh scaled and stretched as a view's ``meta`` records it (model frame, m).
+    Rotated by the view's ``rotation`` and placed at its camera-frame position, it lies on the
+    view's points."""
+    mesh = model.mesh.copy()
+    mesh.apply_transform(np.diag([*(meta["scale"] * np.asarray(meta["stretch"])), 1.0]))
+    return mesh
+
+
 def render_view(model: MeshModel, rng: np.random.Generator, config: ViewConfig | None = None) -> PointCloudSample:
     """Render one random view of ``model``; the sample may have fewer than
     :data:`~perception.pointcloud.MIN_POINTS` points (e.g. a mushroom out of view)."""

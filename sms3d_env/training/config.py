@@ -237,19 +237,14 @@ class TrainConfig:
         if self.residual_descend_trigger and self.algo != "ppo":
             raise bad("residual_descend_trigger", "needs algo 'ppo' (the trigger's exploration is set on "
                                                   "PPO's log standard deviation)")
-        if self.trigger_log_std is not None:
-            if not self.residual_descend_trigger:
-                raise bad("trigger_log_std", "sets the descend trigger's exploration (needs "
-                                             "residual_descend_trigger)")
-            if isinstance(self.trigger_log_std, bool) or not isinstance(self.trigger_log_std, (int, float)) \
-                    or not math.isfinite(self.trigger_log_std):
-                raise bad("trigger_log_std", "must be a finite number")
-        if self.trigger_log_std_final is not None:
-            if self.trigger_log_std is None:
-                raise bad("trigger_log_std_final", "ends a schedule that starts at trigger_log_std (set it too)")
-            if isinstance(self.trigger_log_std_final, bool) or not isinstance(self.trigger_log_std_final, (int, float)) \
-                    or not math.isfinite(self.trigger_log_std_final):
-                raise bad("trigger_log_std_final", "must be a finite number")
+        if self.trigger_log_std is not None and not self.residual_descend_trigger:
+            raise bad("trigger_log_std", "sets the descend trigger's exploration (needs residual_descend_trigger)")
+        if self.trigger_log_std_final is not None and self.trigger_log_std is None:
+            raise bad("trigger_log_std_final", "ends a schedule that starts at trigger_log_std (set it too)")
+        for name in ("trigger_log_std", "trigger_log_std_final"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
+                raise bad(name, "must be a finite number")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:

@@ -51,6 +51,8 @@ DESCEND_TRIGGER_RADIUS_M = 0.02
 #: firing at once in a stall earns little and the mean stays below the threshold; ``sms3d
 #: train-policy --trigger-log-std`` sets it lower.
 DESCEND_TRIGGER_LOG_STD_INIT = -0.9
+#: The trigger's index in the action (after the residual's seven entries).
+DESCEND_TRIGGER_ENTRY = 7
 #: Control steps over which ``approach_motion`` measures the tool's displacement: session 19's
 #: stall escape window (0.4 s at the env's 25 Hz control).
 MOTION_WINDOW_STEPS = 10
@@ -131,7 +133,7 @@ class ResidualPicker(gym.Wrapper):
         else:
             command = np.clip(self._base + self.scale * np.clip(a[:7], -1.0, 1.0), -1.0, 1.0)
         triggered = (self.descend_trigger and self.picker.phase == "approach"
-                     and self._standoff_gap < DESCEND_TRIGGER_RADIUS_M and a[7] > DESCEND_TRIGGER)
+                     and self._standoff_gap < DESCEND_TRIGGER_RADIUS_M and a[DESCEND_TRIGGER_ENTRY] > DESCEND_TRIGGER)
         if triggered:  # the next command is the descent's, from where the tool is
             self.picker.phase = "descend"
             # Its travel limit (stand-off + 2 cm, then lift) counts from the stand-off point.
@@ -140,3 +142,12 @@ class ResidualPicker(gym.Wrapper):
         if self.descend_trigger:
             info["descend_triggered"] = bool(triggered)
         return self._with_base(obs), reward, terminated, truncated, info
+
+
+def set_trigger_log_std(policy: Any, log_std: float) -> None:
+    """Set the exploration log standard deviation of a PPO ``policy``'s trigger entry (the
+    residual's entries keep theirs)."""
+    import torch
+
+    with torch.no_grad():
+        policy.log_std[DESCEND_TRIGGER_ENTRY] = log_std

@@ -99,13 +99,10 @@ def _set_trigger_exploration(model: Any, cfg: TrainConfig) -> None:
     for a fresh policy ``DESCEND_TRIGGER_LOG_STD_INIT`` (an ``init_model`` keeps its own)."""
     if not cfg.residual_descend_trigger or (cfg.trigger_log_std is None and cfg.init_model is not None):
         return
-    import torch
+    from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT, set_trigger_log_std
 
-    from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT
-
-    value = DESCEND_TRIGGER_LOG_STD_INIT if cfg.trigger_log_std is None else cfg.trigger_log_std
-    with torch.no_grad():
-        model.policy.log_std[7] = value
+    set_trigger_log_std(model.policy, DESCEND_TRIGGER_LOG_STD_INIT if cfg.trigger_log_std is None
+                        else cfg.trigger_log_std)
 
 
 def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:

@@ -58,7 +58,7 @@ class WallAwareLinearSchedule:
 
 def trigger_noise_schedule(start: float, end: float, max_wall_s: float | None) -> Any:
     """An SB3 callback: before each rollout, set the descend trigger's log standard deviation
-    (action entry 7 of a PPO policy) on a line from ``start`` to ``end`` over the run (by steps, or
+    (``residual.set_trigger_log_std``) on a line from ``start`` to ``end`` over the run (by steps, or
     with ``max_wall_s`` over whichever runs out first, as :class:`WallAwareLinearSchedule`), and
     log it as ``train/trigger_log_std``.
 
@@ -78,11 +78,10 @@ def trigger_noise_schedule(start: float, end: float, max_wall_s: float | None) -
 
     class _TriggerNoise(BaseCallback):
         def _on_rollout_start(self) -> None:
-            import torch
+            from sms3d_env.training.residual import set_trigger_log_std
 
             value = float(schedule(self.model._current_progress_remaining))
-            with torch.no_grad():
-                self.model.policy.log_std[7] = value
+            set_trigger_log_std(self.model.policy, value)
             self.logger.record("train/trigger_log_std", value)
 
         def _on_step(self) -> bool:

@@ -17,9 +17,11 @@ from perception.pose.data import (
 from perception.pose.pose_net import PoseNet, PoseNetConfig
 from perception.pose.rotations import CHANCE_AXIS_DEG, CHANCE_GEODESIC_DEG
 from perception.pose.synthetic_views import (
+    CAMERA_FROM_WORLD,
     ViewConfig,
     default_models,
     generate_samples,
+    posed_mesh,
     render_view,
 )
 from perception.pose.train import TrainConfig, evaluate, train
@@ -60,11 +62,11 @@ def test_views_are_consistent_with_their_labels(models) -> None:
 def test_a_views_metadata_poses_its_mesh_onto_its_points(models) -> None:
     import trimesh
 
-    s = render_view(models[0], np.random.default_rng(5), ViewConfig(tilt_std_deg=25.0, depth_noise_std=0.0))
+    config = ViewConfig(tilt_std_deg=25.0, depth_noise_std=0.0)
+    s = render_view(models[0], np.random.default_rng(5), config)
     assert len(s.meta["stretch"]) == 3
-    mesh = models[0].mesh.copy()
-    mesh.apply_transform(np.diag([*(s.meta["scale"] * np.asarray(s.meta["stretch"])), 1.0]))
-    origin = np.diag([1.0, -1.0, -1.0]) @ (np.array(s.meta["position_world"]) - [0, 0, 0.40])
+    mesh = posed_mesh(models[0], s.meta)
+    origin = CAMERA_FROM_WORLD @ (np.array(s.meta["position_world"]) - [0, 0, config.camera_height])
     _, distance, _ = trimesh.proximity.closest_point(mesh, (s.points - origin) @ s.rotation)
     assert np.median(distance) < 5e-4  # on the surface but for the pixel grid's quantisation
     unstretched = models[0].mesh.copy()
