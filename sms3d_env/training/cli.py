@@ -60,7 +60,8 @@ def _cmd_train(args: Any) -> int:
                           pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
                           reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model,
                           critic_warmup_steps=args.critic_warmup_steps, reward_pose=args.reward_pose,
-                          success_payoff=args.success_payoff, gamma=args.gamma)
+                          success_payoff=args.success_payoff, gamma=args.gamma,
+                          time_limit_terminal=args.time_limit_terminal)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -92,6 +93,7 @@ def _cmd_train_bc(args: Any) -> int:
                "--reward-pose": (args.reward_pose != "estimate", "it is trained on actions, not rewards"),
                "--success-payoff": (args.success_payoff != "time_left", "it is trained on actions, not rewards"),
                "--gamma": (args.gamma != TrainConfig().gamma, "it is trained on actions, not rewards"),
+               "--time-limit-terminal": (args.time_limit_terminal, "it is trained on actions, not returns"),
                "--normalize-reward": (args.normalize_reward, "it is trained on actions, not rewards"),
                "--vec-env": (args.vec_env != "subproc", "it collects its demonstrations in one env"),
                "--flat-observation": (args.flat_observation, "it clones a MultiInputPolicy")}
@@ -215,6 +217,11 @@ def register(subparsers: Any) -> None:
                         "success comes: with --gamma near 1 the return ranks by success, not speed)")
     p.add_argument("--gamma", type=float, default=defaults.gamma,
                    help="rl/residual: the discount factor (default %(default)s)")
+    p.add_argument("--time-limit-terminal", action="store_true",
+                   help="rl/residual on SMS3DPickTrain-v0: the time limit terminates episodes instead of "
+                        "truncating them, so that PPO does not bootstrap the return there (the policy sees the "
+                        "clock; an approach stalled until the limit then earns what it earned, not the critic's "
+                        "guess of what would follow)")
     p.add_argument("--init-model", default=None, metavar="PATH",
                    help="rl/residual: start from this saved model (model.zip, a checkpoint or best/best_model.zip; "
                         "its observation statistics too with --normalize) instead of a fresh policy")

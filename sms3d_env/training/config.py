@@ -124,6 +124,10 @@ class TrainConfig:
             ``"time_left"`` (default, grows with every step saved) or ``"fixed"`` (the horizon,
             whenever the success comes; with ``gamma`` near 1 the return then ranks behaviours
             by how often they succeed rather than how fast). Needs the staged reward.
+        time_limit_terminal: the step that reaches the time limit terminates the episode instead
+            of truncating it, so that PPO does not bootstrap the return there with the critic's
+            value (:mod:`sms3d_env.training.time_limit`; right for the training id, whose
+            observation holds the time since the reset). Needs ``task_obs`` (the training id).
         init_model: a saved model of this algorithm and architecture (``model.zip``, a checkpoint,
             ``best/best_model.zip``) whose weights, and with ``normalize`` observation
             statistics, the run starts from instead of a fresh policy (e.g. a second phase at a
@@ -179,6 +183,7 @@ class TrainConfig:
     reach_lateral_weight: float = 1.0
     reward_pose: str = "estimate"
     success_payoff: str = "time_left"
+    time_limit_terminal: bool = False
     init_model: str | None = None
     critic_warmup_steps: int = 0
     batch_size: int = 256
@@ -309,6 +314,11 @@ class TrainConfig:
         if self.success_payoff != "time_left" and self.env_id == "SMS3DPick-v0" and self.reward_type != "staged":
             raise bad("success_payoff", "sets the staged reward's success bonus (use SMS3DPickTrain-v0 or "
                                         "reward_type='staged')")
+        if not isinstance(self.time_limit_terminal, bool):
+            raise bad("time_limit_terminal", "must be a bool")
+        if self.time_limit_terminal and self.env_id == "SMS3DPick-v0":
+            raise bad("time_limit_terminal", "ends episodes at a limit the policy must see (the training id "
+                                             "SMS3DPickTrain-v0 observes the time since the reset)")
         if self.init_model is not None and not (isinstance(self.init_model, str) and self.init_model):
             raise bad("init_model", "must be None or the path of a saved model")
         if self.init_model is not None and self.algo != "ppo":
@@ -354,7 +364,8 @@ class TrainConfig:
                 "residual_until_held": self.residual_until_held,
                 "residual_approach_only": self.residual_approach_only,
                 "residual_descend_trigger": self.residual_descend_trigger,
-                "flat_observation": self.flat_observation, **kw}
+                "flat_observation": self.flat_observation,
+                **({"time_limit_terminal": True} if self.time_limit_terminal else {}), **kw}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:

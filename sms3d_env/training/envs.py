@@ -9,7 +9,7 @@ from typing import Any
 
 def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual_until_held: bool = False,
              residual_approach_only: bool = False, residual_descend_trigger: bool = False,
-             flat_observation: bool = False, **kwargs: Any) -> Any:
+             flat_observation: bool = False, time_limit_terminal: bool = False, **kwargs: Any) -> Any:
     """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``
     > 0 wraps the env in a ``ResidualPicker`` (``until_held=residual_until_held``,
     ``approach_only=residual_approach_only``, ``descend_trigger=residual_descend_trigger``);
@@ -20,6 +20,10 @@ def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual
     import sms3d_env  # noqa: F401  (registers the env ids)
 
     env = gym.make(env_id, **kwargs)
+    if time_limit_terminal:
+        from sms3d_env.training.time_limit import TimeLimitAsTerminal
+
+        env = TimeLimitAsTerminal(env)
     if residual_scale > 0:
         from sms3d_env.training.residual import ResidualPicker
 

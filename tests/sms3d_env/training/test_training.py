@@ -114,6 +114,8 @@ def test_sac_short_run(tmp_path):
     ({"success_payoff": "at_once"}, "success_payoff"),
     ({"success_payoff": "fixed"}, "success_payoff"),  # the dense reward has no success bonus
     ({"gamma": 0.0}, "gamma"),
+    ({"time_limit_terminal": True}, "time_limit_terminal"),  # SMS3DPick-v0 does not show the clock
+    ({"env_id": "SMS3DPickTrain-v0", "time_limit_terminal": 1}, "time_limit_terminal"),
     ({"vec_env": "threads"}, "vec_env"),
     ({"flat_observation": 1}, "flat_observation"),
 ])
@@ -162,6 +164,25 @@ def test_the_success_payoff_reaches_the_training_env_only():
     assert cfg.env_kwargs()["success_payoff"] == "fixed"
     assert "success_payoff" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
     assert "success_payoff" not in training_config.env_options(cfg.posture_target)  # evaluation: the default
+
+
+def test_a_terminal_time_limit_reaches_the_training_envs_only(tmp_path):
+    """``time_limit_terminal`` wraps the training envs (and the periodic evaluation's, where it
+    changes nothing that is counted), not the saved env options every later evaluation uses."""
+    from sms3d_env.training.envs import make_env
+    from sms3d_env.training.time_limit import TimeLimitAsTerminal
+
+    cfg = TrainConfig(env_id="SMS3DPickTrain-v0", time_limit_terminal=True)
+    env = make_env(**cfg.env_kwargs())
+    try:
+        wrapper = env
+        while not isinstance(wrapper, TimeLimitAsTerminal):
+            wrapper = wrapper.env
+        assert wrapper.max_episode_steps == cfg.max_episode_steps
+    finally:
+        env.close()
+    assert "time_limit_terminal" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
+    assert "time_limit_terminal" not in training_config.env_options(cfg.posture_target)
 
 
 def test_the_reward_pose_reaches_the_training_env_only():
@@ -298,7 +319,7 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
                                   ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"],
                                   ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"],
                                   ["--success-payoff", "fixed"], ["--gamma", "0.999"], ["--trigger-log-std", "-1.6"],
-                                  ["--trigger-log-std-final", "-3"]],
+                                  ["--trigger-log-std-final", "-3"], ["--time-limit-terminal"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
