@@ -25,6 +25,7 @@ from pathlib import Path
 from perception.choices import BACKBONE_NAMES, HEAD_NAMES, ROTATION_LOSSES
 from perception.cli_detector import millimetres
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
+from perception.pose.augment import AugmentConfig
 from perception.pose.config import PoseNetConfig, TrainConfig
 
 CAMERA_MODEL_HELP = (
@@ -115,6 +116,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             device=args.device, plateau_patience=args.patience, progress=not args.quiet,
             time_limit_s=None if args.time_limit_min is None else args.time_limit_min * 60.0,
             select_by=args.select_by,
+            augment=AugmentConfig(occlusion_prob=args.occlusion_prob, occlusion_fraction=tuple(args.occlusion_fraction)),
         )  # fmt: skip
     except PerceptionConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -246,6 +248,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="with --scenes: also train on N rendered single-mushroom views (seed SEED*1000+1, --model-ids)",
     )  # fmt: skip
     p.add_argument("--camera-model", action="store_true", help=CAMERA_MODEL_HELP)
+    augment = AugmentConfig()
+    p.add_argument("--occlusion-prob", type=float, default=augment.occlusion_prob, metavar="P",
+                   help="hide a bite of each training cloud with probability P, as a neighbour in front would "
+                        "(default %(default)s: off)")
+    p.add_argument("--occlusion-fraction", type=float, nargs=2, default=augment.occlusion_fraction,
+                   metavar=("MIN", "MAX"), help="the share of a cloud's points the bite hides (default: 0.2 0.6)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_train)
 

@@ -26,7 +26,7 @@ from torch.utils.data import Dataset
 
 from perception.errors import PerceptionConfigError
 from perception.pointcloud import MIN_POINTS, SamplingMethod, prepare_cloud, to_tensor
-from perception.pose.augment import AugmentConfig, augment_points
+from perception.pose.augment import AugmentConfig, augment_points, occlude_points
 
 FORMAT_VERSION = 1
 
@@ -141,7 +141,12 @@ class PointCloudPoseDataset(Dataset):
     def __getitem__(self, i: int) -> tuple[torch.Tensor, torch.Tensor, int]:
         s = self.samples[i]
         rng = np.random.default_rng([self.seed, self.epoch, i])
-        cloud = prepare_cloud(s.points, self.num_points, rng, s.colors if self.use_rgb else None, self.sampling)
+        points, colors = s.points, s.colors if self.use_rgb else None
+        # Drawn only when occlusion is on, so that runs without it keep their random streams.
+        if self.augment is not None and self.augment.occlusion_prob > 0 and rng.random() < self.augment.occlusion_prob:
+            points, colors = occlude_points(np.asarray(points, np.float64), rng.uniform(*self.augment.occlusion_fraction),
+                                            rng, colors)
+        cloud = prepare_cloud(points, self.num_points, rng, colors, self.sampling)
         pts, cols = cloud.points, cloud.colors
         if self.augment is not None:
             pts, cols = augment_points(pts, self.augment, rng, cols)
