@@ -61,7 +61,8 @@ def _cmd_train(args: Any) -> int:
                           reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model,
                           critic_warmup_steps=args.critic_warmup_steps, reward_pose=args.reward_pose,
                           success_payoff=args.success_payoff, gamma=args.gamma,
-                          time_limit_terminal=args.time_limit_terminal)
+                          time_limit_terminal=args.time_limit_terminal, use_sde=args.use_sde,
+                          sde_sample_freq=args.sde_sample_freq)
     except ValueError as e:
         print(f"error: {e}")
         return 2
@@ -94,6 +95,8 @@ def _cmd_train_bc(args: Any) -> int:
                "--success-payoff": (args.success_payoff != "time_left", "it is trained on actions, not rewards"),
                "--gamma": (args.gamma != TrainConfig().gamma, "it is trained on actions, not rewards"),
                "--time-limit-terminal": (args.time_limit_terminal, "it is trained on actions, not returns"),
+               "--use-sde": (args.use_sde, "it explores nothing"),
+               "--sde-sample-freq": (args.sde_sample_freq != -1, "it explores nothing"),
                "--normalize-reward": (args.normalize_reward, "it is trained on actions, not rewards"),
                "--vec-env": (args.vec_env != "subproc", "it collects its demonstrations in one env"),
                "--flat-observation": (args.flat_observation, "it clones a MultiInputPolicy")}
@@ -222,6 +225,12 @@ def register(subparsers: Any) -> None:
                         "truncating them, so that PPO does not bootstrap the return there (the policy sees the "
                         "clock; an approach stalled until the limit then earns what it earned, not the critic's "
                         "guess of what would follow)")
+    p.add_argument("--use-sde", action="store_true",
+                   help="ppo: state-dependent exploration (gSDE): noise that stays the same while the state does, "
+                        "redrawn every --sde-sample-freq steps; --log-std-init is then per weight of the noise map "
+                        "(about exp(value) x 8 on each action for a trained 256-wide residual)")
+    p.add_argument("--sde-sample-freq", type=int, default=defaults.sde_sample_freq, metavar="N",
+                   help="with --use-sde: env steps between draws of the noise (default -1: once per rollout)")
     p.add_argument("--init-model", default=None, metavar="PATH",
                    help="rl/residual: start from this saved model (model.zip, a checkpoint or best/best_model.zip; "
                         "its observation statistics too with --normalize) instead of a fresh policy")

@@ -139,7 +139,20 @@ class TrainConfig:
             critic first learns the returns of the policy the run starts from (a residual's:
             the scripted picker's; :mod:`sms3d_env.training.warmup`); 0: no warm-up.
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
-            standard deviation of 1 on every normalised command; a residual starts quieter).
+            standard deviation of 1 on every normalised command; a residual starts quieter). With
+            ``use_sde`` the log standard deviation of each weight of the noise's linear map: the
+            noise on an action is then about ``exp(log_std_init)`` times the norm of the policy's
+            last hidden layer (≈ 8 for a trained 256-wide residual, session 24).
+        use_sde: PPO: generalised state-dependent exploration (gSDE; Raffin et al. 2022, "Smooth
+            exploration for robotic reinforcement learning", CoRL): the exploration noise is a
+            linear function of the policy's last hidden layer whose weights are drawn every
+            ``sde_sample_freq`` steps, so it stays the same while the state does. A stalled
+            approach then fires the descend trigger at once or not at all for the draw, instead
+            of escaping by chance within a few steps (session 23), and not firing costs the
+            episode. An ``init_model`` with Gaussian noise starts the run with its networks and
+            this run's noise (``log_std_init``, ``trigger_log_std``).
+        sde_sample_freq: with ``use_sde``, the env steps between draws of the noise weights (-1:
+            once per rollout of ``n_steps``; SB3's default).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
             policy's per-step forward pass is tiny, and with the env workers (and anything else)
             on the same cores, 2 intra-op threads made it ~50x slower here (64 ms vs 1.2 ms).
@@ -193,6 +206,8 @@ class TrainConfig:
     gamma: float = 0.99
     net_arch: tuple[int, ...] = (256, 256)
     log_std_init: float = 0.0
+    use_sde: bool = False
+    sde_sample_freq: int = -1
     device: str = "cpu"
     torch_threads: int = 1
     verbose: int = 1
@@ -332,6 +347,15 @@ class TrainConfig:
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
             raise bad("net_arch", "must be a non-empty sequence of positive layer widths")
+        if not isinstance(self.use_sde, bool):
+            raise bad("use_sde", "must be a bool")
+        if self.use_sde and self.algo != "ppo":
+            raise bad("use_sde", "is offered for PPO (the recipes' on-policy runs)")
+        if isinstance(self.sde_sample_freq, bool) or not isinstance(self.sde_sample_freq, int) \
+                or not (self.sde_sample_freq == -1 or self.sde_sample_freq >= 1):
+            raise bad("sde_sample_freq", "must be -1 (once per rollout) or a positive number of steps")
+        if self.sde_sample_freq != -1 and not self.use_sde:
+            raise bad("sde_sample_freq", "sets gSDE's redraws (needs use_sde)")
         if not (isinstance(self.log_std_init, (int, float)) and math.isfinite(self.log_std_init)):
             raise bad("log_std_init", "must be a finite number")
         if not self.out:

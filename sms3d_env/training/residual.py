@@ -146,8 +146,9 @@ class ResidualPicker(gym.Wrapper):
 
 def set_trigger_log_std(policy: Any, log_std: float) -> None:
     """Set the exploration log standard deviation of a PPO ``policy``'s trigger entry (the
-    residual's entries keep theirs)."""
+    residual's entries keep theirs); with gSDE (``use_sde``) that of every weight of the
+    trigger's noise map."""
     import torch
 
     with torch.no_grad():
-        policy.log_std[DESCEND_TRIGGER_ENTRY] = log_std
+        policy.log_std[..., DESCEND_TRIGGER_ENTRY] = log_std

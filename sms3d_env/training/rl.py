@@ -52,6 +52,7 @@ def _build_model(cfg: TrainConfig, env: Any) -> Any:
         batch = min(cfg.batch_size, n_steps * cfg.n_envs)
         return PPO(policy, env, learning_rate=rate, n_steps=n_steps,
                    batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
+                   use_sde=cfg.use_sde, sde_sample_freq=cfg.sde_sample_freq,
                    seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
     return SAC(policy, env, learning_rate=rate, buffer_size=cfg.buffer_size,
                learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
@@ -113,13 +114,28 @@ def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:
     _check_init_model(cfg)
     path = Path(cfg.init_model)
     try:
-        model.set_parameters(str(path), exact_match=True, device=cfg.device)
+        if cfg.use_sde:
+            _start_noise_afresh(model, path, cfg.device)
+        else:
+            model.set_parameters(str(path), exact_match=True, device=cfg.device)
     except (ValueError, RuntimeError, KeyError) as exc:
         raise InitModelError(f"TrainConfig.init_model: {path} does not fit a {cfg.algo} policy with "
-                         f"net_arch {list(cfg.net_arch)} on {cfg.env_id} ({exc})") from None
+                             f"net_arch {list(cfg.net_arch)} on {cfg.env_id} ({exc})") from None
     if cfg.normalize:
         with open(observation_stats_path(path), "rb") as f:
             env.obs_rms = pickle.load(f).obs_rms
+
+
+def _start_noise_afresh(model: Any, path: Path, device: str) -> None:
+    """A gSDE run from a saved policy: its networks, this run's exploration noise (a Gaussian
+    policy's log standard deviation has another shape and meaning), a fresh optimiser."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    _, params, _ = load_from_zip_file(str(path), device=device)
+    weights = {k: v for k, v in params["policy"].items() if k != "log_std"}
+    missing, unexpected = model.policy.load_state_dict(weights, strict=False)
+    if unexpected or set(missing) != {"log_std"}:
+        raise ValueError(f"missing {sorted(set(missing) - {'log_std'})}, unexpected {sorted(unexpected)}")
 
 
 def _save_beside_best(env: Any, out: Path, normalize: bool) -> Any:

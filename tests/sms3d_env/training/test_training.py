@@ -262,6 +262,39 @@ def test_the_trigger_exploration_is_set_fresh_and_on_a_continuation_only_when_as
         TrainConfig(residual_scale=0.5, residual_descend_trigger=True, trigger_log_std=float("nan"))
 
 
+def test_a_gsde_run_starts_from_a_gaussian_policys_networks_with_its_own_noise(tmp_path):
+    """``use_sde`` trains PPO with state-dependent noise; from a Gaussian policy it keeps the
+    saved networks (the deterministic action is unchanged at a zero rate) and sets its own noise
+    (``log_std_init``; the trigger's column from ``trigger_log_std``)."""
+    from stable_baselines3 import PPO
+
+    def run(name, **kw):
+        cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
+                          normalize=True, flat_observation=True, n_steps=64, batch_size=64, total_steps=64,
+                          out=str(tmp_path / name),
+                          learning_rate=1e-12, **{**FAST, "eval_freq": 0, "checkpoint_freq": 0}, **kw)
+        train_policy(cfg)
+        return PPO.load(str(tmp_path / name / "model.zip"), device="cpu")
+
+    gaussian = run("gaussian")
+    sde = run("sde", use_sde=True, sde_sample_freq=16, log_std_init=-3.5, trigger_log_std=-3.0,
+              init_model=str(tmp_path / "gaussian" / "model.zip"))
+    assert sde.use_sde and sde.sde_sample_freq == 16
+    log_std = sde.policy.log_std.detach().numpy()
+    assert log_std.shape == (32, 8)  # the last hidden layer's width x the actions
+    np.testing.assert_allclose(log_std[:, :7], -3.5, atol=1e-3)
+    np.testing.assert_allclose(log_std[:, 7], -3.0, atol=1e-3)
+    obs = np.random.default_rng(0).normal(size=(5, *gaussian.observation_space.shape)).astype(np.float32)
+    np.testing.assert_allclose(sde.predict(obs, deterministic=True)[0], gaussian.predict(obs, deterministic=True)[0],
+                               atol=1e-5)
+    with pytest.raises(ValueError, match="TrainConfig.use_sde"):
+        TrainConfig(algo="sac", use_sde=True)
+    with pytest.raises(ValueError, match="TrainConfig.sde_sample_freq"):
+        TrainConfig(sde_sample_freq=8)  # without use_sde
+    with pytest.raises(ValueError, match="TrainConfig.sde_sample_freq"):
+        TrainConfig(use_sde=True, sde_sample_freq=0)
+
+
 def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
     """The training envs start a share of their episodes on the way to a pre-grasp pose; the
     periodic evaluation and every later evaluation of the saved policy start at home."""
@@ -319,7 +352,8 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
                                   ["--critic-warmup-steps", "1000"], ["--reward-pose", "truth"],
                                   ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"],
                                   ["--success-payoff", "fixed"], ["--gamma", "0.999"], ["--trigger-log-std", "-1.6"],
-                                  ["--trigger-log-std-final", "-3"], ["--time-limit-terminal"]],
+                                  ["--trigger-log-std-final", "-3"], ["--time-limit-terminal"],
+                                  ["--use-sde"], ["--sde-sample-freq", "250"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
