@@ -150,7 +150,8 @@ class TrainConfig:
             approach then fires the descend trigger at once or not at all for the draw, instead
             of escaping by chance within a few steps (session 23), and not firing costs the
             episode. An ``init_model`` with Gaussian noise starts the run with its networks and
-            this run's noise (``log_std_init``, ``trigger_log_std``).
+            this run's noise (``log_std_init``, ``trigger_log_std``); one with gSDE noise keeps
+            its own (``trigger_log_std`` still sets the trigger's).
         sde_sample_freq: with ``use_sde``, the env steps between draws of the noise weights (-1:
             once per rollout of ``n_steps``; SB3's default).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the

@@ -115,7 +115,7 @@ def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:
     path = Path(cfg.init_model)
     try:
         if cfg.use_sde:
-            _start_noise_afresh(model, path, cfg.device)
+            _start_sde_from(model, path, cfg.device)
         else:
             model.set_parameters(str(path), exact_match=True, device=cfg.device)
     except (ValueError, RuntimeError, KeyError) as exc:
@@ -126,12 +126,16 @@ def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:
             env.obs_rms = pickle.load(f).obs_rms
 
 
-def _start_noise_afresh(model: Any, path: Path, device: str) -> None:
-    """A gSDE run from a saved policy: its networks, this run's exploration noise (a Gaussian
-    policy's log standard deviation has another shape and meaning), a fresh optimiser."""
+def _start_sde_from(model: Any, path: Path, device: str) -> None:
+    """A gSDE run from a saved policy: its networks and, from a gSDE policy, its noise; from a
+    Gaussian policy (whose log standard deviation has another shape and meaning) this run's
+    noise and a fresh optimiser."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
     _, params, _ = load_from_zip_file(str(path), device=device)
+    if params["policy"]["log_std"].shape == model.policy.log_std.shape:
+        model.set_parameters(params, exact_match=True, device=device)
+        return
     weights = {k: v for k, v in params["policy"].items() if k != "log_std"}
     missing, unexpected = model.policy.load_state_dict(weights, strict=False)
     if unexpected or set(missing) != {"log_std"}:

@@ -287,6 +287,8 @@ def test_a_gsde_run_starts_from_a_gaussian_policys_networks_with_its_own_noise(t
     obs = np.random.default_rng(0).normal(size=(5, *gaussian.observation_space.shape)).astype(np.float32)
     np.testing.assert_allclose(sde.predict(obs, deterministic=True)[0], gaussian.predict(obs, deterministic=True)[0],
                                atol=1e-5)
+    kept = run("sde_kept", use_sde=True, log_std_init=-2.0, init_model=str(tmp_path / "sde" / "model.zip"))
+    np.testing.assert_allclose(kept.policy.log_std.detach().numpy(), log_std, atol=1e-6)  # a gSDE run's own noise
     with pytest.raises(ValueError, match="TrainConfig.use_sde"):
         TrainConfig(algo="sac", use_sde=True)
     with pytest.raises(ValueError, match="TrainConfig.sde_sample_freq"):
