@@ -2,10 +2,13 @@
 once per session and cached by its arguments (rendering and generation are the slow parts)."""
 
 import os
+import signal
+import time
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from functools import cache
+from pathlib import Path
 
 import pytest
 
@@ -45,3 +48,57 @@ def small_dataset(tmp_path_factory):
         return out
 
     return make
+
+
+class ProcessTable:
+    """Processes read from ``/proc``: for tests that kill a command and check its workers."""
+
+    @staticmethod
+    def state(pid: int) -> str | None:
+        """The state letter in /proc/PID/stat (Z = zombie), None if there is no such process."""
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            return None
+
+    @staticmethod
+    def children(pid: int) -> list[int]:
+        found = []
+        for entry in Path("/proc").iterdir():
+            try:
+                if entry.name.isdigit() and int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    found.append(int(entry.name))
+            except OSError:  # ended while we looked
+                pass
+        return found
+
+    @staticmethod
+    def pool_workers(pid: int) -> list[int]:
+        """``pid``'s children started by multiprocessing's spawn."""
+        workers = []
+        for child in ProcessTable.children(pid):
+            try:
+                if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes():
+                    workers.append(child)
+            except OSError:
+                pass
+        return workers
+
+    def survivors(self, pids: list[int], wait_s: float = 5.0) -> list[int]:
+        """Those of ``pids`` still alive (not zombies) after up to ``wait_s`` seconds; they are
+        killed before returning, so that a failing test leaves nothing running."""
+        deadline = time.monotonic() + wait_s
+        while any(self.state(p) not in (None, "Z") for p in pids) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        alive = [p for p in pids if self.state(p) not in (None, "Z")]
+        for pid in alive:
+            os.kill(pid, signal.SIGKILL)
+        return alive
+
+
+@pytest.fixture
+def processes():
+    """A :class:`ProcessTable` (skips where there is no ``/proc``)."""
+    if not Path("/proc/self/stat").exists():
+        pytest.skip("reads processes from /proc")
+    return ProcessTable()

@@ -9,7 +9,6 @@ killed run are removed and redone. Pool workers die with the process that starte
 from __future__ import annotations
 
 import atexit
-import ctypes
 import errno
 import itertools
 import json
@@ -17,10 +16,7 @@ import multiprocessing
 import os
 import platform
 import shutil
-import signal
 import sys
-import threading
-import time
 from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from importlib import metadata
@@ -41,6 +37,7 @@ from generator.dataset.writer import (
     scene_dirname,
     write_scene,
 )
+from generator.processes import die_with_parent
 
 MANIFEST = "manifest.json"
 FORMAT_VERSION = 1
@@ -274,33 +271,10 @@ def _run_pool(todo: list[int], args: tuple[Any, ...], workers: int, update: Call
             pending |= {pool.submit(_run_one, i, args) for i in itertools.islice(queue, len(finished))}
 
 
-_PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
-
-
 def _worker_init(parent_pid: int) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
-    _die_with_parent(parent_pid)
-
-
-def _die_with_parent(parent_pid: int) -> None:
-    """End this worker when ``parent_pid`` dies, even by SIGKILL, so that no orphan keeps
-    writing scenes beside a resumed run (a pool worker otherwise waits on its queue forever).
-
-    On Linux the kernel kills the worker (``PR_SET_PDEATHSIG``), even in the middle of a render
-    that holds the GIL; the parent may have died before that took effect, hence the ``getppid``
-    check after it. Elsewhere a daemon thread polls for the parent's death."""
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
-        if os.getppid() != parent_pid:
-            os._exit(1)
-    else:
-        threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True).start()
-
-
-def _exit_when_orphaned(parent_pid: int, interval: float = 0.2) -> None:
-    while os.getppid() == parent_pid:  # an orphan is re-parented to init or a subreaper
-        time.sleep(interval)
-    os._exit(1)
+    # No orphan may keep writing scenes beside a resumed run.
+    die_with_parent(parent_pid)
 
 
 def _run_ray(todo: list[int], args: tuple[Any, ...], workers: int, update: Callable[[int], Any]) -> None:

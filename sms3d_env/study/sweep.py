@@ -295,7 +295,11 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
     else:
         import multiprocessing
 
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        from generator.processes import die_with_parent
+
+        # Workers die with this process: an orphan would keep writing parts beside a resumed sweep.
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
             for _ in pool.map(_run_and_save, todo, [config] * len(todo), [parts] * len(todo)):
                 bar.update()
     bar.close()

@@ -127,27 +127,7 @@ def test_killed_and_resumed_run_equals_uninterrupted(reference, tmp_path):
     assert tree_bytes(tmp_path) == tree_bytes(reference)
 
 
-def _process_state(pid: int) -> str | None:
-    """The state letter in /proc/PID/stat (Z = zombie), None if there is no such process."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return None
-
-
-def _children(pid: int) -> list[int]:
-    found = []
-    for entry in Path("/proc").iterdir():
-        try:
-            if entry.name.isdigit() and int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
-                found.append(int(entry.name))
-        except OSError:  # ended while we looked
-            pass
-    return found
-
-
-@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads processes from /proc")
-def test_killed_parent_leaves_no_worker_and_resume_is_identical(reference, tmp_path):
+def test_killed_parent_leaves_no_worker_and_resume_is_identical(reference, tmp_path, processes):
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "generator.dataset.cli", "generate", "--out", str(out), "--num-scenes", "4",
            "--seed", "11", "--num-mushrooms", "8", "--width", "160", "--height", "120", "--no-progress",
@@ -156,30 +136,25 @@ def test_killed_parent_leaves_no_worker_and_resume_is_identical(reference, tmp_p
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
     while True:  # until both workers exist and have written a scene
-        children = _children(proc.pid)
-        workers = [c for c in children if b"spawn_main" in Path(f"/proc/{c}/cmdline").read_bytes()]
+        children = processes.children(proc.pid)
+        workers = processes.pool_workers(proc.pid)
         if len(workers) == 2 and any(out.glob("scene_*/DONE")):
             break
         assert proc.poll() is None and time.monotonic() < deadline, "generator ended before its workers wrote"
         time.sleep(0.01)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    deadline = time.monotonic() + 5
-    while any(_process_state(c) not in (None, "Z") for c in children) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    survivors = [c for c in children if _process_state(c) not in (None, "Z")]
-    for pid in survivors:  # do not leave them running if the test fails
-        os.kill(pid, signal.SIGKILL)
+    survivors = processes.survivors(children)
     assert survivors == [], f"processes of the killed run still alive: {survivors} (workers {workers})"
     assert not (out / "coco_train.json").exists(), "the run finished before it was killed"
     generate_dataset(out, CFG, 4, seed=11, progress=False)  # resume (CFG is the command's config)
     assert tree_bytes(out) == tree_bytes(reference)
 
 
-def test_orphaned_worker_watch_exits_when_the_parent_dies():
-    # The portable fallback of _die_with_parent, for systems without prctl(PR_SET_PDEATHSIG).
-    child = ("import os, threading, time; from generator.dataset.runner import _exit_when_orphaned; "
-             "threading.Thread(target=_exit_when_orphaned, args=(os.getppid(), 0.05), daemon=True).start(); "
+def test_orphaned_worker_watch_exits_when_the_parent_dies(processes):
+    # The portable fallback of die_with_parent, for systems without prctl(PR_SET_PDEATHSIG).
+    child = ("import os, threading, time; from generator.processes import exit_when_orphaned; "
+             "threading.Thread(target=exit_when_orphaned, args=(os.getppid(), 0.05), daemon=True).start(); "
              "print(os.getpid(), flush=True); time.sleep(60)")
     parent = f"import subprocess, sys; subprocess.Popen([sys.executable, '-c', {child!r}]).wait()"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -187,13 +162,7 @@ def test_orphaned_worker_watch_exits_when_the_parent_dies():
     pid = int(proc.stdout.readline())
     proc.kill()
     proc.wait()
-    deadline = time.monotonic() + 5
-    while _process_state(pid) not in (None, "Z") and time.monotonic() < deadline:
-        time.sleep(0.05)
-    alive = _process_state(pid) not in (None, "Z")
-    if alive:
-        os.kill(pid, signal.SIGKILL)
-    assert not alive
+    assert processes.survivors([pid]) == []
 
 
 def test_pool_keeps_a_few_scenes_in_flight(monkeypatch):

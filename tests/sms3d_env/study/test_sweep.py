@@ -190,3 +190,25 @@ def test_sweep_compare_keeps_two_sweeps_of_one_picker(tmp_path, capsys):
     table = capsys.readouterr().out
     assert "| scripted | 0° |" in table and "| scripted (tool) | 0° |" in table
     assert (tmp_path / "cmp.png").stat().st_size > 0
+
+
+def test_a_killed_sweep_leaves_no_worker(tmp_path, processes):
+    """``kill -9`` of a sweep with a process pool ends its workers too: an orphan would keep
+    writing parts beside the resumed sweep."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    cmd = [sys.executable, "-m", "sms3d_env.cli", "sweep", "--out", str(tmp_path / "sweep"), "--errors", "0", "10",
+           "--episodes", "40", "--num-mushrooms", "8", "--workers", "2"]
+    proc = subprocess.Popen(cmd, env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while len(workers := processes.pool_workers(proc.pid)) < 2:
+        assert proc.poll() is None and time.monotonic() < deadline, "the sweep ended before its workers started"
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert processes.survivors(workers) == []
