@@ -20,8 +20,9 @@ import gymnasium as gym
 
 class TimeLimitAsTerminal(gym.Wrapper):
     """``env`` with the step that reaches its registered time limit reported as terminated
-    (``info["time_limit_reached"]`` set), not truncated. Other truncations (an unstable
-    simulation) stay truncations.
+    (``info["time_limit_reached"]`` set), not truncated. The pick env truncates nothing but an
+    unstable simulation (``info["unstable_simulation"]``), which stays a truncation, so any other
+    truncation is the ``TimeLimit``'s.
 
     Args:
         env: an env made by ``gym.make`` with a time limit (``env.spec.max_episode_steps``).
@@ -29,22 +30,13 @@ class TimeLimitAsTerminal(gym.Wrapper):
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
-        limit = None if env.spec is None else env.spec.max_episode_steps
-        if limit is None:
+        if env.spec is None or env.spec.max_episode_steps is None:
             raise ValueError("TimeLimitAsTerminal needs an env made with a time limit "
                              "(gym.make(..., max_episode_steps=N)); this one has none")
-        self.max_episode_steps = int(limit)
-        self._steps = 0
-
-    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
-        self._steps = 0
-        return self.env.reset(**kwargs)
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self._steps += 1
-        if truncated and not terminated and self._steps >= self.max_episode_steps \
-                and not info.get("unstable_simulation", False):
+        if truncated and not terminated and not info.get("unstable_simulation", False):
             terminated, truncated = True, False
             info = {**info, "time_limit_reached": True}
         return obs, reward, terminated, truncated, info

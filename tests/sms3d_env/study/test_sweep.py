@@ -1,6 +1,11 @@
 import csv
 import dataclasses
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 from hypothesis import given
@@ -195,12 +200,6 @@ def test_sweep_compare_keeps_two_sweeps_of_one_picker(tmp_path, capsys):
 def test_a_killed_sweep_leaves_no_worker(tmp_path, processes):
     """``kill -9`` of a sweep with a process pool ends its workers too: an orphan would keep
     writing parts beside the resumed sweep."""
-    import os
-    import signal
-    import subprocess
-    import sys
-    import time
-
     cmd = [sys.executable, "-m", "sms3d_env.cli", "sweep", "--out", str(tmp_path / "sweep"), "--errors", "0", "10",
            "--episodes", "40", "--num-mushrooms", "8", "--workers", "2"]
     proc = subprocess.Popen(cmd, env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},

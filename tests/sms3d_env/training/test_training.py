@@ -178,7 +178,7 @@ def test_a_terminal_time_limit_reaches_the_training_envs_only(tmp_path):
         wrapper = env
         while not isinstance(wrapper, TimeLimitAsTerminal):
             wrapper = wrapper.env
-        assert wrapper.max_episode_steps == cfg.max_episode_steps
+        assert wrapper.spec.max_episode_steps == cfg.max_episode_steps
     finally:
         env.close()
     assert "time_limit_terminal" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
