@@ -96,6 +96,7 @@ class PolicyActor:
         self.residual_until_held = bool(self.saved.get("residual_until_held", False))
         self.residual_approach_only = bool(self.saved.get("residual_approach_only", False))
         self.residual_descend_trigger = bool(self.saved.get("residual_descend_trigger", False))
+        self.residual_trigger_only = bool(self.saved.get("residual_trigger_only", False))
         # A policy trained on the flattened observation: the keys in their concatenation order.
         self.observation_keys: list[str] | None = self.saved.get("observation_keys")
         if self.saved.get("flat_observation") and self.observation_keys is None:
@@ -118,7 +119,7 @@ class PolicyActor:
         from sms3d_env.training.envs import make_env
 
         return make_env(self.env_id, self.residual_scale, self.residual_until_held, self.residual_approach_only,
-                        self.residual_descend_trigger,
+                        self.residual_descend_trigger, residual_trigger_only=self.residual_trigger_only,
                         **{**kwargs, **self.env_options})
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:

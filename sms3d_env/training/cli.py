@@ -32,7 +32,8 @@ def _cmd_train(args: Any) -> int:
     residual = args.recipe == "residual"
     for flag, given in (("--residual-until-held", args.residual_until_held),
                         ("--residual-approach-only", args.residual_approach_only),
-                        ("--residual-descend-trigger", args.residual_descend_trigger)):
+                        ("--residual-descend-trigger", args.residual_descend_trigger),
+                        ("--residual-trigger-only", args.residual_trigger_only)):
         if given and not residual:
             print(f"error: {flag} applies to --recipe residual")
             return 2
@@ -44,6 +45,7 @@ def _cmd_train(args: Any) -> int:
                           residual_until_held=args.residual_until_held,
                           residual_approach_only=args.residual_approach_only,
                           residual_descend_trigger=args.residual_descend_trigger,
+                          residual_trigger_only=args.residual_trigger_only,
                           trigger_log_std=args.trigger_log_std, trigger_log_std_final=args.trigger_log_std_final,
                           pose_error_range_deg=args.pose_error_range,
                           log_std_init=args.log_std_init if args.log_std_init is not None
@@ -88,6 +90,7 @@ def _cmd_train_bc(args: Any) -> int:
                "--residual-until-held": (args.residual_until_held, "it trains no residual"),
                "--residual-approach-only": (args.residual_approach_only, "it trains no residual"),
                "--residual-descend-trigger": (args.residual_descend_trigger, "it trains no residual"),
+               "--residual-trigger-only": (args.residual_trigger_only, "it trains no residual"),
                "--trigger-log-std": (args.trigger_log_std is not None, "it trains no residual"),
                "--trigger-log-std-final": (args.trigger_log_std_final is not None, "it trains no residual"),
                "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic"),
@@ -179,6 +182,10 @@ def register(subparsers: Any) -> None:
                         "point, starts the scripted picker's descent from where the tool is (an escape from "
                         "approach stalls, learned); the observation gains the stand-off gap and the tool's "
                         "motion over the last 10 control steps")
+    p.add_argument("--residual-trigger-only", action="store_true",
+                   help="--residual-descend-trigger: the policy's action is the trigger alone; the scripted "
+                        "picker's command runs unchanged (no continuous residual, so a trajectory changes only "
+                        "where the trigger fires)")
     p.add_argument("--trigger-log-std", type=float, default=None, metavar="LOG_STD",
                    help="--residual-descend-trigger: the log standard deviation of the trigger's exploration "
                         "(default -0.9 for a fresh policy, an --init-model's own otherwise; lower: fewer chance "

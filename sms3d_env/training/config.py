@@ -68,6 +68,10 @@ class TrainConfig:
         residual_descend_trigger: the residual's action gains an entry that starts the scripted
             picker's descent near the stand-off point (``ResidualPicker(descend_trigger=True)``).
             Needs ``residual_scale`` > 0.
+        residual_trigger_only: the policy's action is the descend trigger alone; the scripted
+            picker's command runs unchanged (``ResidualPicker(trigger_only=True)``). Needs
+            ``residual_descend_trigger``; excludes ``residual_until_held`` and
+            ``residual_approach_only``.
         trigger_log_std: the log standard deviation of that entry's exploration noise; ``None``
             (default): ``DESCEND_TRIGGER_LOG_STD_INIT`` (-0.9) for a fresh policy, an
             ``init_model``'s own otherwise. Lower, a stochastic policy fires less often by chance,
@@ -168,6 +172,7 @@ class TrainConfig:
     residual_until_held: bool = False
     residual_approach_only: bool = False
     residual_descend_trigger: bool = False
+    residual_trigger_only: bool = False
     trigger_log_std: float | None = None
     trigger_log_std_final: float | None = None
     pose_error_range_deg: tuple[float, float] | None = None
@@ -258,6 +263,13 @@ class TrainConfig:
         if self.residual_descend_trigger and self.algo != "ppo":
             raise bad("residual_descend_trigger", "needs algo 'ppo' (the trigger's exploration is set on "
                                                   "PPO's log standard deviation)")
+        if not isinstance(self.residual_trigger_only, bool):
+            raise bad("residual_trigger_only", "must be a bool")
+        if self.residual_trigger_only and not self.residual_descend_trigger:
+            raise bad("residual_trigger_only", "keeps only the descend trigger (set residual_descend_trigger)")
+        if self.residual_trigger_only and (self.residual_until_held or self.residual_approach_only):
+            raise bad("residual_trigger_only", "has no continuous residual for residual_until_held or "
+                                               "residual_approach_only to limit")
         if self.trigger_log_std is not None and not self.residual_descend_trigger:
             raise bad("trigger_log_std", "sets the descend trigger's exploration (needs residual_descend_trigger)")
         if self.trigger_log_std_final is not None and self.trigger_log_std is None:
@@ -389,6 +401,7 @@ class TrainConfig:
                 "residual_until_held": self.residual_until_held,
                 "residual_approach_only": self.residual_approach_only,
                 "residual_descend_trigger": self.residual_descend_trigger,
+                **({"residual_trigger_only": True} if self.residual_trigger_only else {}),
                 "flat_observation": self.flat_observation,
                 **({"time_limit_terminal": True} if self.time_limit_terminal else {}), **kw}
 

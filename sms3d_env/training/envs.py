@@ -9,10 +9,10 @@ from typing import Any
 
 def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual_until_held: bool = False,
              residual_approach_only: bool = False, residual_descend_trigger: bool = False,
-             flat_observation: bool = False, time_limit_terminal: bool = False, **kwargs: Any) -> Any:
+             residual_trigger_only: bool = False, flat_observation: bool = False, time_limit_terminal: bool = False, **kwargs: Any) -> Any:
     """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``
     > 0 wraps the env in a ``ResidualPicker`` (``until_held=residual_until_held``,
-    ``approach_only=residual_approach_only``, ``descend_trigger=residual_descend_trigger``);
+    ``approach_only=residual_approach_only``, ``descend_trigger=residual_descend_trigger``, ``trigger_only=residual_trigger_only``);
     ``flat_observation`` flattens the dict observation
     into one vector (gymnasium's ``FlattenObservation``, outermost)."""
     import gymnasium as gym
@@ -28,7 +28,8 @@ def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual
         from sms3d_env.training.residual import ResidualPicker
 
         env = ResidualPicker(env, residual_scale, until_held=residual_until_held,
-                             approach_only=residual_approach_only, descend_trigger=residual_descend_trigger)
+                             approach_only=residual_approach_only, descend_trigger=residual_descend_trigger,
+                             trigger_only=residual_trigger_only)
     if flat_observation:
         env = gym.wrappers.FlattenObservation(env)
     return env

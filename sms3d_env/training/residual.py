@@ -21,6 +21,10 @@ stand-off point, it starts the descent from where the tool is (session 19: under
 error the scripted approach stalls short of its 3 mm / 3 deg tolerance, and a hand-written escape
 from such stalls won 7 of 100 paired episodes at 20 deg; the trigger lets the policy learn when
 to give up on the approach, from what it sees: joint velocities, its command, the tool offset).
+With ``trigger_only`` the action is the trigger alone: the scripted picker's command runs
+unchanged and the policy decides only when its approach gives way to the descent (session 24: the
+residual's seven continuous entries changed trajectories in every episode, and their noise swapped
+about as many picks each way as the trigger won at 30 deg).
 A policy whose trigger entry has mean 0 (an untrained one, run deterministically) never fires
 it; in training PPO explores it with its own, wider noise (:data:`DESCEND_TRIGGER_LOG_STD_INIT`).
 With the trigger the observation also gains ``approach_motion``: the tool's distance from the
@@ -51,8 +55,8 @@ DESCEND_TRIGGER_RADIUS_M = 0.02
 #: firing at once in a stall earns little and the mean stays below the threshold; ``sms3d
 #: train-policy --trigger-log-std`` sets it lower.
 DESCEND_TRIGGER_LOG_STD_INIT = -0.9
-#: The trigger's index in the action (after the residual's seven entries).
-DESCEND_TRIGGER_ENTRY = 7
+#: The trigger's index in the action: the last entry (after the residual's seven, or alone).
+DESCEND_TRIGGER_ENTRY = -1
 #: Control steps over which ``approach_motion`` measures the tool's displacement: session 19's
 #: stall escape window (0.4 s at the env's 25 Hz control).
 MOTION_WINDOW_STEPS = 10
@@ -76,7 +80,7 @@ class ResidualPicker(gym.Wrapper):
     """
 
     def __init__(self, env: gym.Env, scale: float = 0.5, until_held: bool = False,
-                 approach_only: bool = False, descend_trigger: bool = False) -> None:
+                 approach_only: bool = False, descend_trigger: bool = False, trigger_only: bool = False) -> None:
         super().__init__(env)
         if not (isinstance(scale, (int, float)) and np.isfinite(scale) and 0 < scale <= 2):
             raise ValueError(f"residual scale must be in (0, 2], got {scale!r}")
@@ -90,12 +94,19 @@ class ResidualPicker(gym.Wrapper):
             raise ValueError("approach_only already drops the residual before the seal; leave until_held False")
         if not isinstance(descend_trigger, bool):
             raise ValueError(f"descend_trigger must be a bool, got {descend_trigger!r}")
+        if not isinstance(trigger_only, bool):
+            raise ValueError(f"trigger_only must be a bool, got {trigger_only!r}")
+        if trigger_only and not descend_trigger:
+            raise ValueError("trigger_only keeps only the descend trigger; set descend_trigger=True")
+        if trigger_only and (until_held or approach_only):
+            raise ValueError("trigger_only has no continuous residual for until_held/approach_only to limit")
         self.scale = float(scale)
         self.until_held, self.approach_only, self.descend_trigger = until_held, approach_only, descend_trigger
+        self.trigger_only = trigger_only
         self.picker = ScriptedPicker.for_env(env)
         extra = {"base_action": spaces.Box(-1.0, 1.0, (7,), np.float32)}
         if descend_trigger:
-            self.action_space = spaces.Box(-1.0, 1.0, (8,), np.float32)
+            self.action_space = spaces.Box(-1.0, 1.0, (1 if trigger_only else 8,), np.float32)
             extra["approach_motion"] = spaces.Box(0.0, np.inf, (2,), np.float32)
         self.observation_space = spaces.Dict({**env.observation_space.spaces, **extra})
         self._tool_trail: deque[np.ndarray] = deque(maxlen=MOTION_WINDOW_STEPS + 1)
@@ -127,8 +138,10 @@ class ResidualPicker(gym.Wrapper):
         a = np.asarray(action, np.float32)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action of shape {a.shape} for a residual whose action space is "
-                             f"{self.action_space.shape} (descend_trigger={self.descend_trigger})")
-        if (self.until_held and self._held) or (self.approach_only and self._base_phase != "approach"):
+                             f"{self.action_space.shape} (descend_trigger={self.descend_trigger}, "
+                             f"trigger_only={self.trigger_only})")
+        if (self.trigger_only or (self.until_held and self._held)
+                or (self.approach_only and self._base_phase != "approach")):
             command = self._base
         else:
             command = np.clip(self._base + self.scale * np.clip(a[:7], -1.0, 1.0), -1.0, 1.0)

@@ -81,6 +81,11 @@ def _check_init_model(cfg: TrainConfig) -> None:
         raise InitModelError(f"TrainConfig.init_model: {path} was trained {'with' if trigger else 'without'} the "
                              f"residual's descend trigger ({8 if trigger else 7} actions); set "
                              f"residual_descend_trigger={trigger} to start from it")
+    trigger_only = bool(saved_cfg.get("residual_trigger_only", False))
+    if trigger_only != cfg.residual_trigger_only:
+        raise InitModelError(f"TrainConfig.init_model: {path} was trained {'with' if trigger_only else 'without'} "
+                             f"residual_trigger_only ({1 if trigger_only else 8} actions); set "
+                             f"residual_trigger_only={trigger_only} to start from it")
     flat = bool(saved_cfg.get("flat_observation", False))
     if flat != cfg.flat_observation:
         raise InitModelError(f"TrainConfig.init_model: {path} was trained on "
@@ -96,7 +101,7 @@ def _check_init_model(cfg: TrainConfig) -> None:
 
 
 def _set_trigger_exploration(model: Any, cfg: TrainConfig) -> None:
-    """The descend trigger's log standard deviation (action entry 7): ``cfg.trigger_log_std``, or
+    """The descend trigger's log standard deviation (the action's last entry): ``cfg.trigger_log_std``, or
     for a fresh policy ``DESCEND_TRIGGER_LOG_STD_INIT`` (an ``init_model`` keeps its own)."""
     if not cfg.residual_descend_trigger or (cfg.trigger_log_std is None and cfg.init_model is not None):
         return

@@ -453,6 +453,48 @@ def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
         ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=1)
 
 
+def test_a_trigger_only_residual_sends_the_scripted_commands_and_fires_the_descent():
+    """With ``trigger_only`` a one-entry action changes nothing but when the descent starts: under
+    the threshold every command is the scripted picker's, and the episode is its episode; above
+    it the descent starts on the first step within reach, as with the eight-entry trigger."""
+    from sms3d_env.pickers import run_episode
+    from sms3d_env.training.residual import DESCEND_TRIGGER, ResidualPicker
+
+    plain = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
+
+    def run(trigger_value, trigger_only):
+        recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene_config=SMALL))
+        env = ResidualPicker(recorder, scale=0.5, descend_trigger=True, trigger_only=trigger_only)
+        obs, _ = env.reset(seed=2)
+        action = np.zeros(env.action_space.shape, np.float32)
+        action[-1] = trigger_value
+        bases, fired, done = [], [], False
+        while not done:
+            bases.append(obs["base_action"].copy())
+            obs, _, terminated, truncated, info = env.step(action)
+            fired.append(info["descend_triggered"])
+            done = terminated or truncated
+        return bases, recorder.commands, fired, info
+
+    bases, commands, fired, info = run(DESCEND_TRIGGER - 0.1, trigger_only=True)
+    assert not any(fired)
+    np.testing.assert_array_equal(np.array(commands), np.array(bases))
+    assert (info["is_success"], len(commands)) == (expected["success"], expected["steps"])
+    _, only_commands, only_fired, _ = run(1.0, trigger_only=True)
+    _, full_commands, full_fired, _ = run(1.0, trigger_only=False)
+    assert sum(only_fired) == 1 and only_fired == full_fired
+    np.testing.assert_allclose(only_commands, full_commands, atol=1e-6)  # an 8-entry zero residual
+    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=True, trigger_only=True)
+    assert env.action_space.shape == (1,)
+    with pytest.raises(ValueError, match="descend_trigger=True"):
+        ResidualPicker(plain, trigger_only=True)
+    with pytest.raises(ValueError, match="no continuous residual"):
+        ResidualPicker(plain, descend_trigger=True, trigger_only=True, approach_only=True)
+    with pytest.raises(ValueError, match="trigger_only must be a bool"):
+        ResidualPicker(plain, descend_trigger=True, trigger_only="yes")
+
+
 def test_the_descend_trigger_observes_the_stand_off_gap_and_the_tool_motion_over_its_window():
     from sms3d_env.training.residual import MOTION_WINDOW_STEPS, ResidualPicker
 

@@ -231,6 +231,38 @@ def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option)
             TrainConfig(algo="sac", residual_scale=0.5, residual_descend_trigger=True)
 
 
+def test_a_trigger_only_residual_is_trained_and_rebuilt_with_its_one_action(tmp_path):
+    """``residual_trigger_only`` reaches the wrapper and, through ``config.json``, the env of
+    every later evaluation; the one action explores with the trigger's noise; a run of the other
+    action layout cannot start from it."""
+    from sms3d_env.training.actor import PolicyActor
+    from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT
+
+    common = dict(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
+                  normalize=True, total_steps=128, n_steps=128, batch_size=64,
+                  **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
+    train_policy(TrainConfig(residual_trigger_only=True, out=str(tmp_path / "only"), **common))
+    actor = PolicyActor(tmp_path / "only" / "model.zip")
+    env = actor.make_env()
+    try:
+        assert env.trigger_only and env.action_space.shape == (1,)
+        obs, _ = env.reset(seed=0)
+        action = actor(obs)
+        assert action.shape == (1,)
+        env.step(action)
+        assert actor.model.policy.log_std.detach().numpy() == pytest.approx([DESCEND_TRIGGER_LOG_STD_INIT], abs=0.05)
+    finally:
+        env.close()
+    with pytest.raises(InitModelError, match="with residual_trigger_only.*residual_trigger_only=True"):
+        train_policy(TrainConfig(init_model=str(tmp_path / "only" / "model.zip"), out=str(tmp_path / "eight"),
+                                 **common))
+    with pytest.raises(ValueError, match="TrainConfig.residual_trigger_only.*residual_descend_trigger"):
+        TrainConfig(residual_scale=0.5, residual_trigger_only=True)
+    with pytest.raises(ValueError, match="TrainConfig.residual_trigger_only.*no continuous residual"):
+        TrainConfig(residual_scale=0.5, residual_descend_trigger=True, residual_trigger_only=True,
+                    residual_approach_only=True)
+
+
 def test_the_trigger_exploration_is_set_fresh_and_on_a_continuation_only_when_asked(tmp_path):
     """``trigger_log_std`` sets the trigger entry's noise of a fresh policy and of one continued
     from ``init_model``; left at None, a continuation keeps the saved policy's own;
@@ -355,7 +387,7 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
                                   ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"],
                                   ["--success-payoff", "fixed"], ["--gamma", "0.999"], ["--trigger-log-std", "-1.6"],
                                   ["--trigger-log-std-final", "-3"], ["--time-limit-terminal"],
-                                  ["--use-sde"], ["--sde-sample-freq", "250"]],
+                                  ["--use-sde"], ["--sde-sample-freq", "250"], ["--residual-trigger-only"]],
                          ids=lambda f: f[0])
 def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
     parser = argparse.ArgumentParser()
@@ -421,8 +453,9 @@ def test_cli_registers_subcommands():
     assert (b.episodes, b.pose_error_deg) == (30, 30.0) and callable(b.func)
     bad = parser.parse_args(["train-policy", "--n-envs", "0"])
     assert bad.func(bad) == 2
-    not_residual = parser.parse_args(["train-policy", "--residual-until-held"])
-    assert not_residual.func(not_residual) == 2
+    for flag in ("--residual-until-held", "--residual-trigger-only"):
+        not_residual = parser.parse_args(["train-policy", flag])
+        assert not_residual.func(not_residual) == 2
 
 
 def test_module_main_eval_policy(ppo_run, tmp_path, capsys):
