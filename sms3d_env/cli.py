@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "sweep": "sms3d_env.study.sweep",
     "sweep-compare": "sms3d_env.study.sweep",
     "train-policy": "sms3d_env.training.cli",
+    "train-trigger": "sms3d_env.training.cli",
     "eval-policy": "sms3d_env.training.cli",
     "learning-curve": "sms3d_env.training.cli",
     "demo": "sms3d_env.demo",

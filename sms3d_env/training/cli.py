@@ -1,4 +1,4 @@
-"""``sms3d train-policy``, ``sms3d eval-policy`` and ``sms3d learning-curve`` (also
+"""``sms3d train-policy``, ``sms3d train-trigger``, ``sms3d eval-policy`` and ``sms3d learning-curve`` (also
 ``python -m sms3d_env.training ...``)."""
 
 from __future__ import annotations
@@ -117,6 +117,21 @@ def _cmd_train_bc(args: Any) -> int:
         print(f"error: {e}")
         return 2
     print(json.dumps(train_bc(cfg), indent=2))
+    return 0
+
+
+def _cmd_train_trigger(args: Any) -> int:
+    from sms3d_env.training.trigger_rollouts import TriggerConfig, train_trigger
+
+    try:
+        cfg = TriggerConfig(out=args.out, episodes=args.episodes, seed=args.seed, num_mushrooms=args.num_mushrooms,
+                            pose_error_range_deg=tuple(args.pose_error_range), posture_target=args.posture_target,
+                            candidates=args.candidates, margin=args.margin, epochs=args.epochs,
+                            workers=args.workers)
+    except ValueError as e:
+        print(f"error: {e}")
+        return 2
+    print(json.dumps(train_trigger(cfg), indent=2))
     return 0
 
 
@@ -267,6 +282,28 @@ def register(subparsers: Any) -> None:
                     help="estimate: the scripted picker labels from the observed pose; truth: from "
                          "the true pose (a privileged teacher under --pose-error-deg/--pose-error-range)")
     p.set_defaults(func=_cmd_train)
+
+    from sms3d_env.training.trigger_rollouts import TriggerConfig
+
+    tdef = TriggerConfig()
+    t = subparsers.add_parser(
+        "train-trigger", help="learn when to give up on the scripted approach and descend, from paired "
+                              "counterfactual rollouts (a trigger-only residual; sms3d_env.training.trigger_rollouts)")
+    t.add_argument("--out", default=tdef.out, help="run folder (labels/, model.zip, config.json, summary.json)")
+    t.add_argument("--episodes", type=int, default=tdef.episodes, help="training episodes (one seed each)")
+    t.add_argument("--seed", type=int, default=tdef.seed,
+                   help="first episode seed (the study's held-out episodes start at 1000000)")
+    t.add_argument("--num-mushrooms", type=int, default=tdef.num_mushrooms)
+    t.add_argument("--pose-error-range", type=float, nargs=2, default=list(tdef.pose_error_range_deg),
+                   metavar=("LOW", "HIGH"), help="orientation error drawn per episode in [LOW, HIGH] degrees")
+    t.add_argument("--posture-target", choices=POSTURE_TARGETS, default=tdef.posture_target)
+    t.add_argument("--candidates", type=int, default=tdef.candidates,
+                   help="most replays per episode, each firing the trigger at one step within its reach")
+    t.add_argument("--margin", type=float, default=tdef.margin,
+                   help="the expected gain in success probability the policy needs to fire")
+    t.add_argument("--epochs", type=int, default=tdef.epochs, help="regression epochs")
+    t.add_argument("--workers", type=int, default=tdef.workers, help="processes collecting the labels")
+    t.set_defaults(func=_cmd_train_trigger)
 
     e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "
                                                   "(default: the shipped one)")

@@ -25,6 +25,7 @@ import json
 import math
 import os
 import time
+import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -250,15 +251,23 @@ def _save_npz_atomic(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, 
     os.replace(tmp, path)
 
 
+def read_npz_made_with(path: Path, meta: dict[str, Any]) -> dict[str, np.ndarray] | None:
+    """``path``'s arrays if it was written (by ``_save_npz_atomic``) with ``meta``; None if it is
+    missing, unreadable, cut short or made with other settings."""
+    try:
+        with np.load(path) as z:
+            if json.loads(str(z["__meta__"])) == meta:
+                return {k: z[k] for k in z.files if k != "__meta__"}
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        pass
+    return None
+
+
 def _load_or_make(path: Path, meta: dict[str, Any], make: Any) -> dict[str, np.ndarray]:
     """``path``'s arrays if it was written with ``meta``, else ``make()``'s, saved there."""
-    if path.exists():
-        try:
-            with np.load(path) as z:
-                if json.loads(str(z["__meta__"])) == meta:
-                    return {k: z[k] for k in z.files if k != "__meta__"}
-        except (OSError, ValueError, KeyError):
-            pass  # unreadable or from an interrupted write: make it again
+    arrays = read_npz_made_with(path, meta)
+    if arrays is not None:
+        return arrays
     arrays = make()
     path.parent.mkdir(parents=True, exist_ok=True)
     _save_npz_atomic(path, arrays, meta)

@@ -1,0 +1,287 @@
+"""A descend trigger learned from counterfactual rollouts: one step of policy improvement on the
+scripted picker (Tesauro & Galperin 1996, "On-line policy improvement using Monte-Carlo
+search"; Bertsekas, Tsitsiklis & Wu 1997, "Rollout algorithms for combinatorial
+optimization"), distilled into a stable-baselines3 policy.
+
+Why not PPO: the trigger's decision matters in a few percent of episodes (approach stalls under
+20-30 deg of pose error), and PPO's advantage of firing is estimated from returns that differ by
+a whole success between unrelated episodes. Sessions 21-25 trained it eight ways; every run fired
+on entering the trigger radius, not in stalls (``benchmarks/RESULTS.md``). Here each label is a
+*paired* comparison: a seeded episode replays exactly, so firing at step ``t`` and never firing
+differ by that firing alone.
+
+For each training episode (its own seed; a pose error drawn per episode):
+
+1. the scripted picker's episode in the trigger-only residual env, never firing, recording the
+   observations at the steps where the trigger can act (approach, within
+   :data:`~sms3d_env.training.residual.DESCEND_TRIGGER_RADIUS_M` of the stand-off point);
+2. up to ``candidates`` of those steps, evenly spread, each replayed from the same seed with the
+   trigger fired there;
+3. the label of each: success when fired there minus success never firing (-1, 0 or 1), the gain
+   of firing now over leaving the approach to the scripted picker.
+
+A PPO policy's mean (:func:`~sms3d_env.training.imitation.behaviour_clone`) is regressed onto
+``0.5 + label - margin``: it estimates ``0.5 + E[gain | observation] - margin`` and so fires
+(above :data:`~sms3d_env.training.residual.DESCEND_TRIGGER`) at the first step where the expected
+gain of firing exceeds ``margin``. It sees only the trigger-only residual's observation (the
+estimated pose, the arm's state, the wrist wrench, the stand-off gap and the tool's motion),
+never the true pose.
+
+``train_trigger(TriggerConfig(...))`` writes into ``out``: ``labels/`` (one ``.npz`` per chunk of
+episodes, written atomically; a re-run with the same settings reuses them, so an interrupted
+collection resumes), ``model.zip``, ``config.json`` (the env and wrapper the policy runs in:
+``sms3d sweep --picker residual:OUT/model.zip`` loads it) and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sms3d_env.training.config import POSTURE_TARGETS, env_options
+
+#: Episodes per label file (and per worker task).
+CHUNK_EPISODES = 20
+#: The residual wrapper's scale in the saved configuration: a trigger-only residual does not use
+#: it, but ``make_env`` wraps an env only for a positive scale.
+TRIGGER_ONLY_SCALE = 1.0
+
+
+@dataclass(frozen=True)
+class TriggerConfig:
+    """Settings of :func:`train_trigger`.
+
+    Attributes:
+        out: run folder.
+        episodes: training episodes, seeds ``seed .. seed + episodes - 1`` (the study's held-out
+            episodes start at 1,000,000; keep these apart).
+        seed: first episode seed; also seeds the network's initialisation and batches.
+        num_mushrooms: mushrooms per bed.
+        pose_error_range_deg: (low, high): each episode's orientation error is drawn uniformly
+            in it (degrees).
+        posture_target: the IK posture option (``sms3d_env.training.config.POSTURE_TARGETS``).
+        candidates: most replays per episode (steps where the trigger can act, evenly spread).
+        margin: the expected gain of firing (success probability, 0-1) the policy needs to fire.
+        net_arch, epochs, batch_size, learning_rate: the regression's network and optimiser.
+        workers: processes collecting labels (they die with this one).
+        torch_threads: torch intra-op threads for the regression.
+    """
+
+    out: str = "runs/trigger"
+    episodes: int = 600
+    seed: int = 3_000_000
+    num_mushrooms: int = 25
+    pose_error_range_deg: tuple[float, float] = (15.0, 35.0)
+    posture_target: str = "tool"
+    candidates: int = 10
+    margin: float = 0.05
+    net_arch: tuple[int, ...] = (256, 256)
+    epochs: int = 30
+    batch_size: int = 256
+    learning_rate: float = 1e-3
+    workers: int = 1
+    torch_threads: int = 1
+
+    def __post_init__(self) -> None:
+        def bad(name: str, why: str) -> ValueError:
+            return ValueError(f"TriggerConfig.{name} {why}, got {getattr(self, name)!r}")
+
+        for name in ("episodes", "num_mushrooms", "candidates", "epochs", "batch_size", "workers", "torch_threads"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise bad(name, "must be an integer >= 1")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
+            raise bad("seed", "must be an integer >= 0")
+        lo_hi = self.pose_error_range_deg
+        if (len(lo_hi) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in lo_hi)
+                or not 0 <= lo_hi[0] <= lo_hi[1] <= 90):
+            raise bad("pose_error_range_deg", "must be (low, high) degrees with 0 <= low <= high <= 90")
+        if self.posture_target not in POSTURE_TARGETS:
+            raise bad("posture_target", f"must be one of {POSTURE_TARGETS}")
+        if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and -1 < self.margin < 1):
+            raise bad("margin", "must be a number in (-1, 1) (a gain in success probability)")
+        if not (isinstance(self.learning_rate, (int, float)) and math.isfinite(self.learning_rate)
+                and self.learning_rate > 0):
+            raise bad("learning_rate", "must be a number > 0")
+        if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
+            raise bad("net_arch", "must list at least one layer width >= 1")
+
+    def label_settings(self) -> dict[str, Any]:
+        """What the labels depend on: a label file made with other settings is made again."""
+        return {"num_mushrooms": self.num_mushrooms, "pose_error_range_deg": list(self.pose_error_range_deg),
+                "posture_target": self.posture_target, "candidates": self.candidates}
+
+
+def trigger_env(cfg: TriggerConfig) -> Any:
+    """The env the trigger acts in: ``SMS3DPickTrain-v0`` inside a trigger-only residual."""
+    from sms3d_env.training.envs import make_env
+    from sms3d_env.training.imitation import TRAIN_ENV_ID, train_env_kwargs
+
+    return make_env(TRAIN_ENV_ID, TRIGGER_ONLY_SCALE, residual_descend_trigger=True, residual_trigger_only=True,
+                    **train_env_kwargs(cfg.num_mushrooms, pose_error_range_deg=cfg.pose_error_range_deg,
+                                       posture_target=cfg.posture_target))
+
+
+def _residual(env: Any) -> Any:
+    from sms3d_env.training.residual import ResidualPicker
+
+    while not isinstance(env, ResidualPicker):
+        env = env.env
+    return env
+
+
+def _episode(env: Any, seed: int, fire_at: int | None = None) -> tuple[bool, list[tuple[dict, bool]]]:
+    """The seeded episode, firing the trigger at step ``fire_at`` only (never if None): its
+    success and, per step, the observation and whether the trigger could act there."""
+    from sms3d_env.training.residual import DESCEND_TRIGGER_RADIUS_M
+
+    wrapper = _residual(env)
+    fire, hold = np.ones(1, np.float32), -np.ones(1, np.float32)
+    obs, _ = env.reset(seed=seed)
+    trace, done, step, info = [], False, 0, {}
+    while not done:
+        can_act = wrapper.picker.phase == "approach" and wrapper._standoff_gap < DESCEND_TRIGGER_RADIUS_M
+        trace.append(({k: np.array(v) for k, v in obs.items()}, can_act))  # the env may reuse its arrays
+        obs, _, terminated, truncated, info = env.step(fire if step == fire_at else hold)
+        done = terminated or truncated
+        step += 1
+    return bool(info["is_success"]), trace
+
+
+def label_episode(env: Any, seed: int, candidates: int) -> tuple[list[dict], list[int], bool]:
+    """The labelled observations of one seeded episode (see the module docstring): their
+    observations, labels (-1, 0, 1) and whether the scripted episode succeeded."""
+    base, trace = _episode(env, seed)
+    steps = [t for t, (_, can_act) in enumerate(trace) if can_act]
+    if len(steps) > candidates:
+        steps = [steps[int(round(i))] for i in np.linspace(0, len(steps) - 1, candidates)]
+    labels = [int(_episode(env, seed, fire_at=t)[0]) - int(base) for t in steps]
+    return [trace[t][0] for t in steps], labels, base
+
+
+def _label_chunk(cfg: TriggerConfig, first: int, path: str) -> str:
+    """Label episodes ``first ..`` (a chunk) and write them to ``path`` atomically."""
+    from sms3d_env.training.imitation import _save_npz_atomic
+
+    env = trigger_env(cfg)
+    rows: dict[str, list[np.ndarray]] = {}
+    labels, episode, base = [], [], []
+    try:
+        for seed in range(first, min(first + CHUNK_EPISODES, cfg.seed + cfg.episodes)):
+            observations, ys, success = label_episode(env, seed, cfg.candidates)
+            for o in observations:
+                for k, v in o.items():
+                    rows.setdefault(k, []).append(np.asarray(v, np.float32))
+            labels += ys
+            episode += [seed] * len(ys)
+            base.append(success)
+    finally:
+        env.close()
+    arrays = {k: np.stack(v) for k, v in rows.items()}
+    arrays.update(labels=np.asarray(labels, np.int8), episode=np.asarray(episode, np.int64),
+                  scripted_success=np.asarray(base, bool))
+    _save_npz_atomic(Path(path), arrays, cfg.label_settings())
+    return path
+
+
+def collect_labels(cfg: TriggerConfig, progress: bool = True) -> dict[str, np.ndarray]:
+    """Every chunk's labels (``out/labels/``), collecting the chunks that are missing or were
+    made with other settings; observations per key, ``labels``, ``episode`` and the scripted
+    success of every episode (``scripted_success``, per episode, not per label)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from tqdm.auto import tqdm
+
+    from generator.processes import die_with_parent
+    from sms3d_env.training.imitation import read_npz_made_with
+
+    folder = Path(cfg.out) / "labels"
+    folder.mkdir(parents=True, exist_ok=True)
+    firsts = range(cfg.seed, cfg.seed + cfg.episodes, CHUNK_EPISODES)
+    paths = {f: str(folder / f"episodes_{f}.npz") for f in firsts}
+
+    todo = [f for f in firsts if read_npz_made_with(Path(paths[f]), cfg.label_settings()) is None]
+    bar = tqdm(total=len(firsts), initial=len(firsts) - len(todo), desc="trigger labels (chunks)",
+               disable=not progress)
+    if cfg.workers <= 1:
+        for f in todo:
+            _label_chunk(cfg, f, paths[f])
+            bar.update()
+    else:
+        with ProcessPoolExecutor(cfg.workers, mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
+            for _ in pool.map(_label_chunk, [cfg] * len(todo), todo, [paths[f] for f in todo]):
+                bar.update()
+    bar.close()
+    parts = [read_npz_made_with(Path(paths[f]), cfg.label_settings()) for f in firsts]
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def fit_trigger(cfg: TriggerConfig, labels: dict[str, np.ndarray], progress: bool = True) -> tuple[Any, list[float]]:
+    """A PPO model (``MultiInputPolicy`` on the trigger env's observation) whose mean is
+    regressed onto ``0.5 + label - margin``; returns it and the loss per epoch."""
+    from sms3d_env.training.imitation import behaviour_clone, build_policy_model
+
+    targets = np.clip(0.5 + labels["labels"].astype(np.float32) - cfg.margin, -1.0, 1.0)[:, None]
+    data = {**labels, "actions": targets.astype(np.float32)}
+    env = trigger_env(cfg)
+    try:
+        model = build_policy_model(env, data, cfg.net_arch, log_std=-3.0, seed=cfg.seed)
+    finally:
+        env.close()
+    losses = behaviour_clone(model, data, cfg.epochs, cfg.batch_size, cfg.learning_rate, cfg.seed, progress)
+    return model, losses
+
+
+def train_trigger(cfg: TriggerConfig, progress: bool = True) -> dict[str, Any]:
+    """Collect (or reuse) the labels, fit the trigger, save ``model.zip``, ``config.json`` and
+    ``summary.json`` in ``cfg.out``; returns the summary."""
+    import torch
+
+    import sms3d_env
+    from sms3d_env.training.imitation import TRAIN_ENV_ID
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(cfg.torch_threads)
+    try:
+        t0 = time.perf_counter()
+        labels = collect_labels(cfg, progress)
+        t_labels = time.perf_counter() - t0
+        if len(labels["labels"]) == 0:
+            raise RuntimeError("no episode reached the trigger's radius: nothing to learn from "
+                               "(check the env options and the pose error range)")
+        model, losses = fit_trigger(cfg, labels, progress)
+        mean = model.predict({k: labels[k] for k in model.observation_space.spaces}, deterministic=True)[0]
+        wall = time.perf_counter() - t0
+    finally:
+        torch.set_num_threads(threads)
+    model.save(str(out / "model.zip"))
+    from sms3d_env.training.residual import DESCEND_TRIGGER
+
+    config = {"recipe": "trigger-rollouts", "algo": "ppo", "env_id": TRAIN_ENV_ID,
+              "env_options": {**sms3d_env.TRAIN_OPTIONS, **env_options(cfg.posture_target)},
+              "max_episode_steps": 250, "residual_scale": TRIGGER_ONLY_SCALE,
+              "residual_descend_trigger": True, "residual_trigger_only": True,
+              **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
+    (out / "config.json").write_text(json.dumps(config, indent=2))
+    y = labels["labels"]
+    fires = mean[:, 0] > DESCEND_TRIGGER
+    summary = {"recipe": "trigger-rollouts", "episodes": cfg.episodes,
+               "scripted_success": float(labels["scripted_success"].mean()),
+               "labelled_states": int(len(y)), "labels": {str(v): int((y == v).sum()) for v in (-1, 0, 1)},
+               "fires_in_labelled_states": int(fires.sum()),
+               "mean_label_where_it_fires": float(y[fires].mean()) if fires.any() else None,
+               "final_loss": losses[-1], "labels_wall_s": round(t_labels, 1), "wall_s": round(wall, 1),
+               "model": str(out / "model.zip")}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
