@@ -1,6 +1,6 @@
 """Pickers by name, for the study and the benchmarks: ``"scripted"``, ``"policy[:PATH]"`` (a
-saved SB3 policy; no path: the shipped one) or ``"residual:PATH"`` (a residual policy on top of
-the scripted picker).
+saved SB3 policy; no path: the shipped one) or ``"residual[:PATH]"`` (a residual policy on top of
+the scripted picker; no path: the shipped descend trigger).
 
 A learned picker runs on the env id and options it was trained with (the ``config.json`` of its
 run: beside the model or, for a checkpoint, in its run folder), so ``make_picker_env`` builds
@@ -20,7 +20,8 @@ PICKER_KINDS = ("scripted", "policy", "residual")
 
 @dataclass(frozen=True)
 class PickerSpec:
-    """``kind`` in ``PICKER_KINDS``; ``path`` the model (None: the shipped policy)."""
+    """``kind`` in ``PICKER_KINDS``; ``path`` the model (None: the shipped policy, or for a
+    residual the shipped descend trigger)."""
 
     kind: str = "scripted"
     path: str | None = None
@@ -31,17 +32,26 @@ class PickerSpec:
             return "scripted"
         return f"{self.kind}:{Path(self.path).parent.name}" if self.path else self.kind
 
+    @property
+    def model_path(self) -> Path | None:
+        """The model a learned picker loads (the shipped one of its kind without a path); None
+        for the scripted picker."""
+        from sms3d_env.training.actor import SHIPPED_POLICY, SHIPPED_TRIGGER
+
+        if self.kind == "scripted":
+            return None
+        return Path(self.path) if self.path else (SHIPPED_TRIGGER if self.kind == "residual" else SHIPPED_POLICY)
+
 
 def parse_picker(text: str) -> PickerSpec:
-    """``"scripted"``, ``"policy"``, ``"policy:PATH"`` or ``"residual:PATH"`` (ValueError naming
-    the picker otherwise; a missing model file raises FileNotFoundError)."""
+    """``"scripted"``, ``"policy[:PATH]"`` or ``"residual[:PATH]"`` (ValueError naming the picker
+    otherwise; a missing model file raises FileNotFoundError)."""
     kind, _, path = str(text).partition(":")
     if kind not in PICKER_KINDS:
-        raise ValueError(f"picker must be one of {PICKER_KINDS} (policy/residual with :PATH), got {text!r}")
+        raise ValueError(f"picker must be one of {PICKER_KINDS} (policy/residual with an optional :PATH), "
+                         f"got {text!r}")
     if kind == "scripted" and path:
         raise ValueError(f"the scripted picker takes no model path, got {text!r}")
-    if kind == "residual" and not path:
-        raise ValueError("picker 'residual' needs the model: residual:PATH/model.zip")
     if path and not Path(path).is_file():
         raise FileNotFoundError(f"picker model not found: {path}")
     return PickerSpec(kind, path or None)
@@ -50,7 +60,7 @@ def parse_picker(text: str) -> PickerSpec:
 def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     """``(env, picker)``: the env the picker was trained on (``env_kwargs`` added) and the picker,
     a callable ``obs -> action``. A learned picker sets torch to one intra-op thread."""
-    from sms3d_env.training.actor import SHIPPED_POLICY, PolicyActor
+    from sms3d_env.training.actor import PolicyActor
     from sms3d_env.training.envs import make_env
 
     if spec.kind == "scripted":
@@ -64,6 +74,6 @@ def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     # study's worker processes would oversubscribe the cores (2 workers x 2 threads on 2 cores
     # ran the policy sweep ~2.5x slower).
     torch.set_num_threads(1)
-    actor = PolicyActor(spec.path or SHIPPED_POLICY)
+    actor = PolicyActor(spec.model_path)
     env = actor.make_env(**env_kwargs)
     return env, actor

@@ -10,11 +10,12 @@
 | the critic warm-up that freezes PPO's actor first (``critic_warmup``) | :mod:`~sms3d_env.training.warmup` |
 | behaviour cloning + DAgger of the scripted picker (``BCConfig``, ``train_bc``) | :mod:`~sms3d_env.training.imitation` |
 | residual policies on top of the scripted picker (``ResidualPicker``) | :mod:`~sms3d_env.training.residual` |
+| a descend trigger learned from paired counterfactual rollouts (``TriggerConfig``, ``train_trigger``) | :mod:`~sms3d_env.training.trigger_rollouts` |
 | the shipped policies' features extractor (``NormalizedFlatten``) | :mod:`~sms3d_env.training.policy_features` |
-| a saved policy as a picker (``load_model``, ``PolicyActor``, ``SHIPPED_POLICY``) | :mod:`~sms3d_env.training.actor` |
+| a saved policy as a picker (``load_model``, ``PolicyActor``, ``SHIPPED_POLICY``, ``SHIPPED_TRIGGER``) | :mod:`~sms3d_env.training.actor` |
 | success of a saved policy (``evaluate_policy_success``) | :mod:`~sms3d_env.training.evaluation` |
 | learning curves of runs (``read_curve``, ``sms3d learning-curve``) | :mod:`~sms3d_env.training.learning_curve` |
-| ``sms3d train-policy`` / ``eval-policy`` (``register``, ``main``; ``python -m sms3d_env.training``) | :mod:`~sms3d_env.training.cli` |
+| ``sms3d train-policy`` / ``train-trigger`` / ``eval-policy`` (``register``, ``main``; ``python -m sms3d_env.training``) | :mod:`~sms3d_env.training.cli` |
 
 The names load their module on first access (``sms3d --help`` pays for none of SB3 or torch).
 """
@@ -27,8 +28,9 @@ _EXPORTS = {
     "make_env": "envs", "train_policy": "rl", "WallAwareLinearSchedule": "schedules",
     "critic_warmup": "warmup",
     "BCConfig": "imitation", "train_bc": "imitation", "ResidualPicker": "residual",
+    "TriggerConfig": "trigger_rollouts", "train_trigger": "trigger_rollouts",
     "NormalizedFlatten": "policy_features",
-    "SHIPPED_POLICY": "actor", "VECNORM_FILE": "actor", "PolicyActor": "actor", "load_model": "actor",
+    "SHIPPED_POLICY": "actor", "SHIPPED_TRIGGER": "actor", "VECNORM_FILE": "actor", "PolicyActor": "actor", "load_model": "actor",
     "evaluate_policy_success": "evaluation", "success_line": "evaluation",
     "read_curve": "learning_curve", "register": "cli", "main": "cli",
 }  # fmt: skip

@@ -1,5 +1,6 @@
 """A saved pick policy as a picker: ``load_model`` and ``PolicyActor`` (observation statistics and
-the env it was trained on from the files beside it); ``SHIPPED_POLICY`` is the shipped one."""
+the env it was trained on from the files beside it); ``SHIPPED_POLICY`` is the shipped one, and
+``SHIPPED_TRIGGER`` the shipped descend trigger (a residual picker)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,9 @@ from sms3d_env.training.config import ALGOS
 
 #: The shipped pick policy (``model.zip`` with its ``config.json``, ``README.md``, metrics).
 SHIPPED_POLICY = Path(__file__).parents[1] / "weights" / "pick_policy" / "model.zip"
+#: The shipped descend trigger: a trigger-only residual learned from counterfactual rollouts
+#: (:mod:`sms3d_env.training.trigger_rollouts`), with its ``config.json``, ``README.md``, metrics.
+SHIPPED_TRIGGER = Path(__file__).parents[1] / "weights" / "descend_trigger" / "model.zip"
 VECNORM_FILE = "vecnormalize.pkl"
 
 

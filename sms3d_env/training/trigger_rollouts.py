@@ -75,13 +75,13 @@ class TriggerConfig:
     """
 
     out: str = "runs/trigger"
-    episodes: int = 600
+    episodes: int = 1200
     seed: int = 3_000_000
     num_mushrooms: int = 25
     pose_error_range_deg: tuple[float, float] = (15.0, 35.0)
     posture_target: str = "tool"
     candidates: int = 10
-    margin: float = 0.05
+    margin: float = 0.15
     net_arch: tuple[int, ...] = (256, 256)
     epochs: int = 30
     batch_size: int = 256

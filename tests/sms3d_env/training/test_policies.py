@@ -63,7 +63,8 @@ def test_eval_policy_names_a_missing_model(capsys, tmp_path):
 
 
 @pytest.mark.parametrize("text, error", [("nonsense", ValueError), ("scripted:x.zip", ValueError),
-                                         ("residual", ValueError), ("policy:/no/such/model.zip", FileNotFoundError)])
+                                         ("residual:/no/such/model.zip", FileNotFoundError),
+                                         ("policy:/no/such/model.zip", FileNotFoundError)])
 def test_parse_picker_refuses_bad_names(text, error):
     with pytest.raises(error):
         parse_picker(text)
@@ -72,6 +73,10 @@ def test_parse_picker_refuses_bad_names(text, error):
 def test_parse_picker_defaults():
     assert parse_picker("scripted") == PickerSpec("scripted", None)
     assert parse_picker("policy") == PickerSpec("policy", None)  # the shipped one
+    assert parse_picker("residual") == PickerSpec("residual", None)  # the shipped descend trigger
+    assert parse_picker("residual").model_path.is_file() and parse_picker("policy").model_path.is_file()
+    assert parse_picker("residual").model_path != parse_picker("policy").model_path
+    assert parse_picker("scripted").model_path is None
 
 
 def test_sweep_runs_a_learned_picker_on_the_same_episodes(bc_run, tmp_path):
