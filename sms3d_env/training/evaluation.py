@@ -52,37 +52,35 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
                     max_episode_steps or actor.saved.get("max_episode_steps", 250))
     if actor.env_id != "SMS3DPick-v0":
         kw.pop("reward_type")
-    import torch
+    from sms3d_env.training.threads import torch_threads
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # per-step inference of a small MLP: more threads only add overhead
-    env = actor.make_env(**kw)
-    causes: Counter[str] = Counter()
-    successes = reachable = reach_succ = detached = held = 0
-    returns, lengths, per_episode = [], [], []
-    try:
-        for i in tqdm(range(episodes), desc="eval-policy", disable=not progress, unit="ep"):
-            obs, info = env.reset(seed=seed + i)
-            done, total, steps = False, 0.0, 0
-            while not done:
-                obs, reward, terminated, truncated, info = env.step(actor(obs))
-                total += float(reward)
-                steps += 1
-                done = terminated or truncated
-            ok = bool(info["is_success"])
-            successes += ok
-            per_episode.append(ok)
-            reachable += bool(info["reachable"])
-            reach_succ += ok and bool(info["reachable"])
-            detached += bool(info["target_detached"])
-            held += bool(info["gripped_target"])
-            if not ok:
-                causes[str(info["failure_cause"])] += 1
-            returns.append(total)
-            lengths.append(steps)
-    finally:
-        env.close()
-        torch.set_num_threads(threads)
+    with torch_threads(1):  # per-step inference of a small MLP: more threads only add overhead
+        env = actor.make_env(**kw)
+        causes: Counter[str] = Counter()
+        successes = reachable = reach_succ = detached = held = 0
+        returns, lengths, per_episode = [], [], []
+        try:
+            for i in tqdm(range(episodes), desc="eval-policy", disable=not progress, unit="ep"):
+                obs, info = env.reset(seed=seed + i)
+                done, total, steps = False, 0.0, 0
+                while not done:
+                    obs, reward, terminated, truncated, info = env.step(actor(obs))
+                    total += float(reward)
+                    steps += 1
+                    done = terminated or truncated
+                ok = bool(info["is_success"])
+                successes += ok
+                per_episode.append(ok)
+                reachable += bool(info["reachable"])
+                reach_succ += ok and bool(info["reachable"])
+                detached += bool(info["target_detached"])
+                held += bool(info["gripped_target"])
+                if not ok:
+                    causes[str(info["failure_cause"])] += 1
+                returns.append(total)
+                lengths.append(steps)
+        finally:
+            env.close()
     lo, hi = wilson_interval(successes, episodes)
     return {
         "model": str(actor.path), "episodes": episodes, "successes": successes,

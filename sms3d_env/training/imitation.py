@@ -348,15 +348,13 @@ def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
     """Collect (or reuse) demonstrations, clone them, save ``model.zip`` + ``config.json`` +
     ``summary.json`` in ``cfg.out``; returns the summary."""
     import gymnasium as gym
-    import torch
 
     import sms3d_env
+    from sms3d_env.training.threads import torch_threads
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(cfg.torch_threads)
-    try:
+    with torch_threads(cfg.torch_threads):
         t0 = time.perf_counter()
         demos = load_or_collect(cfg, progress)
         t_demo = time.perf_counter() - t0
@@ -382,8 +380,6 @@ def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
             losses += behaviour_clone(model, data, cfg.dagger_epochs, cfg.batch_size,
                                       cfg.learning_rate, cfg.seed + r, progress)
         wall = time.perf_counter() - t0
-    finally:
-        torch.set_num_threads(threads)
     model.save(str(out / "model.zip"))
     config = {"recipe": "bc", "algo": "ppo", "env_id": TRAIN_ENV_ID,
               "env_options": {**sms3d_env.TRAIN_OPTIONS, **env_options(cfg.posture_target)},

@@ -199,17 +199,13 @@ def train_policy(cfg: TrainConfig) -> dict[str, Any]:
     TensorBoard events if ``tensorboard`` is installed, ``checkpoints/``, ``best/best_model.zip``,
     ``eval/evaluations.npz`` and ``monitor/`` (per-episode return, length, is_success).
     """
-    import torch
+    from sms3d_env.training.threads import torch_threads
 
     # A SubprocVecEnv for training and a DummyVecEnv for evaluation is intended here.
     warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(cfg.torch_threads)
-    try:
+    with torch_threads(cfg.torch_threads):
         return _train(cfg)
-    finally:
-        torch.set_num_threads(threads)
 
 
 def _train(cfg: TrainConfig) -> dict[str, Any]:

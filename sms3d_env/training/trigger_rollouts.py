@@ -244,16 +244,13 @@ def fit_trigger(cfg: TriggerConfig, labels: dict[str, np.ndarray], progress: boo
 def train_trigger(cfg: TriggerConfig, progress: bool = True) -> dict[str, Any]:
     """Collect (or reuse) the labels, fit the trigger, save ``model.zip``, ``config.json`` and
     ``summary.json`` in ``cfg.out``; returns the summary."""
-    import torch
-
     import sms3d_env
     from sms3d_env.training.imitation import TRAIN_ENV_ID
+    from sms3d_env.training.threads import torch_threads
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(cfg.torch_threads)
-    try:
+    with torch_threads(cfg.torch_threads):
         t0 = time.perf_counter()
         labels = collect_labels(cfg, progress)
         t_labels = time.perf_counter() - t0
@@ -263,8 +260,6 @@ def train_trigger(cfg: TriggerConfig, progress: bool = True) -> dict[str, Any]:
         model, losses = fit_trigger(cfg, labels, progress)
         mean = model.predict({k: labels[k] for k in model.observation_space.spaces}, deterministic=True)[0]
         wall = time.perf_counter() - t0
-    finally:
-        torch.set_num_threads(threads)
     model.save(str(out / "model.zip"))
     from sms3d_env.training.residual import DESCEND_TRIGGER
 
