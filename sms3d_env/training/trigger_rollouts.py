@@ -5,8 +5,9 @@ optimization"), distilled into a stable-baselines3 policy.
 
 Why not PPO: the trigger's decision matters in a few percent of episodes (approach stalls under
 20-30 deg of pose error), and PPO's advantage of firing is estimated from returns that differ by
-a whole success between unrelated episodes. Sessions 21-25 trained it eight ways; every run fired
-on entering the trigger radius, not in stalls (``benchmarks/RESULTS.md``). Here each label is a
+a whole success between unrelated episodes. Sessions 21-25 trained it in eleven runs; each run
+learned to fire on every entry into the trigger's radius or hardly fired at all, and none beat the
+scripted picker at 30 deg (``benchmarks/RESULTS.md``). Here each label is a
 *paired* comparison: a seeded episode replays exactly, so firing at step ``t`` and never firing
 differ by that firing alone.
 
