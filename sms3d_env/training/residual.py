@@ -128,6 +128,13 @@ class ResidualPicker(gym.Wrapper):
         self._held = bool(obs["suction"][1] > 0.5)
         return {**obs, "base_action": self._base, **extra}
 
+    @property
+    def trigger_can_fire(self) -> bool:
+        """Whether the descend trigger acts on the next step: the scripted picker approaches and
+        the tool is within :data:`DESCEND_TRIGGER_RADIUS_M` of the stand-off point."""
+        return (self.descend_trigger and self.picker.phase == "approach"
+                and self._standoff_gap < DESCEND_TRIGGER_RADIUS_M)
+
     def reset(self, **kwargs: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         self.picker.reset()
@@ -145,8 +152,7 @@ class ResidualPicker(gym.Wrapper):
             command = self._base
         else:
             command = np.clip(self._base + self.scale * np.clip(a[:7], -1.0, 1.0), -1.0, 1.0)
-        triggered = (self.descend_trigger and self.picker.phase == "approach"
-                     and self._standoff_gap < DESCEND_TRIGGER_RADIUS_M and a[DESCEND_TRIGGER_ENTRY] > DESCEND_TRIGGER)
+        triggered = self.trigger_can_fire and a[DESCEND_TRIGGER_ENTRY] > DESCEND_TRIGGER
         if triggered:  # the next command is the descent's, from where the tool is
             self.picker.phase = "descend"
             # Its travel limit (stand-off + 2 cm, then lift) counts from the stand-off point.

@@ -141,15 +141,12 @@ def _residual(env: Any) -> Any:
 def _episode(env: Any, seed: int, fire_at: int | None = None) -> tuple[bool, list[tuple[dict, bool]]]:
     """The seeded episode, firing the trigger at step ``fire_at`` only (never if None): its
     success and, per step, the observation and whether the trigger could act there."""
-    from sms3d_env.training.residual import DESCEND_TRIGGER_RADIUS_M
-
     wrapper = _residual(env)
     fire, hold = np.ones(1, np.float32), -np.ones(1, np.float32)
     obs, _ = env.reset(seed=seed)
     trace, done, step, info = [], False, 0, {}
     while not done:
-        can_act = wrapper.picker.phase == "approach" and wrapper._standoff_gap < DESCEND_TRIGGER_RADIUS_M
-        trace.append(({k: np.array(v) for k, v in obs.items()}, can_act))  # the env may reuse its arrays
+        trace.append(({k: np.array(v) for k, v in obs.items()}, wrapper.trigger_can_fire))  # the env may reuse its arrays
         obs, _, terminated, truncated, info = env.step(fire if step == fire_at else hold)
         done = terminated or truncated
         step += 1
@@ -235,6 +232,8 @@ def fit_trigger(cfg: TriggerConfig, labels: dict[str, np.ndarray], progress: boo
     data = {**labels, "actions": targets.astype(np.float32)}
     env = trigger_env(cfg)
     try:
+        # The trigger acts deterministically (the mean); the noise matters only to a stochastic
+        # rollout, where sigma 0.05 keeps it near the mean.
         model = build_policy_model(env, data, cfg.net_arch, log_std=-3.0, seed=cfg.seed)
     finally:
         env.close()
