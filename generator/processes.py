@@ -2,7 +2,8 @@
 
 A ``ProcessPoolExecutor`` worker whose parent is killed (``kill -9``, an out-of-memory kill)
 otherwise waits on its queue, or finishes its task and writes, forever beside a resumed run.
-Pass :func:`die_with_parent` as the pool's ``initializer`` with ``initargs=(os.getpid(),)``.
+Pass :func:`die_with_parent` as the pool's ``initializer`` with ``initargs=(os.getpid(),)``, or
+take :func:`worker_pool`, a spawn pool that does so.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import signal
 import sys
 import threading
 import time
+from concurrent.futures import ProcessPoolExecutor
 
 _PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 
@@ -37,3 +39,11 @@ def exit_when_orphaned(parent_pid: int, interval: float = 0.2) -> None:
     while os.getppid() == parent_pid:
         time.sleep(interval)
     os._exit(1)
+
+
+def worker_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of ``workers`` spawned processes that die with this one (:func:`die_with_parent`)."""
+    import multiprocessing
+
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=die_with_parent, initargs=(os.getpid(),))

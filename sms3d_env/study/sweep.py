@@ -15,7 +15,6 @@ import dataclasses
 import json
 import math
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -290,13 +289,10 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
             _run_and_save(task, config, parts)
             bar.update()
     else:
-        import multiprocessing
-
-        from generator.processes import die_with_parent
+        from generator.processes import worker_pool
 
         # Workers die with this process: an orphan would keep writing parts beside a resumed sweep.
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
+        with worker_pool(workers) as pool:
             for _ in pool.map(_run_and_save, todo, [config] * len(todo), [parts] * len(todo)):
                 bar.update()
     bar.close()

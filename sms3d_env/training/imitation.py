@@ -245,14 +245,16 @@ def collect_demonstrations(cfg: BCConfig, progress: bool = True) -> dict[str, np
     return _rollouts(cfg, range(cfg.seed, cfg.seed + cfg.episodes), progress=progress)
 
 
-def _save_npz_atomic(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+def save_npz_atomic(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    """``arrays`` and ``meta`` (JSON) written to ``path`` through a temporary file and a rename, so
+    that a killed run leaves the old file or none, never half of one."""
     tmp = path.with_suffix(".tmp.npz")
     np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays)
     os.replace(tmp, path)
 
 
 def read_npz_made_with(path: Path, meta: dict[str, Any]) -> dict[str, np.ndarray] | None:
-    """``path``'s arrays if it was written (by ``_save_npz_atomic``) with ``meta``; None if it is
+    """``path``'s arrays if it was written (by ``save_npz_atomic``) with ``meta``; None if it is
     missing, unreadable, cut short or made with other settings."""
     try:
         with np.load(path) as z:
@@ -270,7 +272,7 @@ def _load_or_make(path: Path, meta: dict[str, Any], make: Any) -> dict[str, np.n
         return arrays
     arrays = make()
     path.parent.mkdir(parents=True, exist_ok=True)
-    _save_npz_atomic(path, arrays, meta)
+    save_npz_atomic(path, arrays, meta)
     return arrays
 
 

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -121,7 +120,8 @@ class TriggerConfig:
 
 
 def trigger_env(cfg: TriggerConfig) -> Any:
-    """The env the trigger acts in: ``SMS3DPickTrain-v0`` inside a trigger-only residual."""
+    """The env the trigger acts in: ``SMS3DPickTrain-v0`` inside a trigger-only residual (the
+    ``ResidualPicker`` is the outermost wrapper)."""
     from sms3d_env.training.envs import make_env
     from sms3d_env.training.imitation import TRAIN_ENV_ID, train_env_kwargs
 
@@ -130,43 +130,36 @@ def trigger_env(cfg: TriggerConfig) -> Any:
                                        posture_target=cfg.posture_target))
 
 
-def _residual(env: Any) -> Any:
-    from sms3d_env.training.residual import ResidualPicker
-
-    while not isinstance(env, ResidualPicker):
-        env = env.env
-    return env
-
-
-def _episode(env: Any, seed: int, fire_at: int | None = None) -> tuple[bool, list[tuple[dict, bool]]]:
-    """The seeded episode, firing the trigger at step ``fire_at`` only (never if None): its
-    success and, per step, the observation and whether the trigger could act there."""
-    wrapper = _residual(env)
+def _episode(env: Any, seed: int, fire_at: int | None = None,
+             record: bool = False) -> tuple[bool, list[tuple[int, dict[str, np.ndarray]]]]:
+    """The seeded episode of the trigger env ``env`` (a ``ResidualPicker``), firing the trigger at
+    step ``fire_at`` only (never if None): its success and, with ``record``, the steps where the
+    trigger could act and their observations."""
     fire, hold = np.ones(1, np.float32), -np.ones(1, np.float32)
     obs, _ = env.reset(seed=seed)
-    trace, done, step, info = [], False, 0, {}
+    reachable, done, step, info = [], False, 0, {}
     while not done:
-        trace.append(({k: np.array(v) for k, v in obs.items()}, wrapper.trigger_can_fire))  # the env may reuse its arrays
+        if record and env.trigger_can_fire:
+            reachable.append((step, {k: np.array(v) for k, v in obs.items()}))  # the env may reuse its arrays
         obs, _, terminated, truncated, info = env.step(fire if step == fire_at else hold)
         done = terminated or truncated
         step += 1
-    return bool(info["is_success"]), trace
+    return bool(info["is_success"]), reachable
 
 
 def label_episode(env: Any, seed: int, candidates: int) -> tuple[list[dict], list[int], bool]:
-    """The labelled observations of one seeded episode (see the module docstring): their
-    observations, labels (-1, 0, 1) and whether the scripted episode succeeded."""
-    base, trace = _episode(env, seed)
-    steps = [t for t, (_, can_act) in enumerate(trace) if can_act]
-    if len(steps) > candidates:
-        steps = [steps[int(round(i))] for i in np.linspace(0, len(steps) - 1, candidates)]
-    labels = [int(_episode(env, seed, fire_at=t)[0]) - int(base) for t in steps]
-    return [trace[t][0] for t in steps], labels, base
+    """The labelled observations of one seeded episode of the trigger env ``env`` (see the module
+    docstring): their observations, labels (-1, 0, 1) and whether the scripted episode succeeded."""
+    base, reachable = _episode(env, seed, record=True)
+    if len(reachable) > candidates:
+        reachable = [reachable[int(round(i))] for i in np.linspace(0, len(reachable) - 1, candidates)]
+    labels = [int(_episode(env, seed, fire_at=t)[0]) - int(base) for t, _ in reachable]
+    return [o for _, o in reachable], labels, base
 
 
 def _label_chunk(cfg: TriggerConfig, first: int, path: str) -> str:
     """Label episodes ``first ..`` (a chunk) and write them to ``path`` atomically."""
-    from sms3d_env.training.imitation import _save_npz_atomic
+    from sms3d_env.training.imitation import save_npz_atomic
 
     env = trigger_env(cfg)
     rows: dict[str, list[np.ndarray]] = {}
@@ -185,7 +178,7 @@ def _label_chunk(cfg: TriggerConfig, first: int, path: str) -> str:
     arrays = {k: np.stack(v) for k, v in rows.items()}
     arrays.update(labels=np.asarray(labels, np.int8), episode=np.asarray(episode, np.int64),
                   scripted_success=np.asarray(base, bool))
-    _save_npz_atomic(Path(path), arrays, cfg.label_settings())
+    save_npz_atomic(Path(path), arrays, cfg.label_settings())
     return path
 
 
@@ -193,12 +186,9 @@ def collect_labels(cfg: TriggerConfig, progress: bool = True) -> dict[str, np.nd
     """Every chunk's labels (``out/labels/``), collecting the chunks that are missing or were
     made with other settings; observations per key, ``labels``, ``episode`` and the scripted
     success of every episode (``scripted_success``, per episode, not per label)."""
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
     from tqdm.auto import tqdm
 
-    from generator.processes import die_with_parent
+    from generator.processes import worker_pool
     from sms3d_env.training.imitation import read_npz_made_with
 
     folder = Path(cfg.out) / "labels"
@@ -214,8 +204,7 @@ def collect_labels(cfg: TriggerConfig, progress: bool = True) -> dict[str, np.nd
             _label_chunk(cfg, f, paths[f])
             bar.update()
     else:
-        with ProcessPoolExecutor(cfg.workers, mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
+        with worker_pool(cfg.workers) as pool:
             for _ in pool.map(_label_chunk, [cfg] * len(todo), todo, [paths[f] for f in todo]):
                 bar.update()
     bar.close()
