@@ -188,7 +188,7 @@ def samples_from_detections(
     missing bits, the camera's noise. Unmatched detections and mushrooms are left out.
     ``cloud_pixels(mask, depth) -> (mask, depth)`` (e.g. ``PosePipeline.cloud_pixels``) trims each
     matched mask and smooths its depth as the pipeline will before its points are taken;
-    matching uses the whole mask.
+    matching uses the whole mask. Each sample carries its points' RGB (for ``use_rgb`` networks).
     """
     from generator.dataset.readers import instance_in_camera, read_scene_files, scene_indices
     from generator.dataset.writer import scene_dirname
@@ -221,7 +221,7 @@ def samples_from_detections(
                 continue
             taken.add(best)
             mask, depth = (det.mask, s.depth) if cloud_pixels is None else cloud_pixels(det.mask, s.depth)
-            points, _ = depth_to_points(depth, s.intrinsics, mask)
+            points, colors = depth_to_points(depth, s.intrinsics, mask, s.rgb)
             if len(points) < MIN_POINTS:
                 continue
             rng = np.random.default_rng(np.random.SeedSequence([seed, index, best]))
@@ -231,5 +231,6 @@ def samples_from_detections(
             meta = {"scene_id": index, "instance_id": best, "species": inst["species"],
                     "cap_diameter": inst["cap_diameter"], "num_valid": len(points), "mask_iou": best_iou,
                     "tilt_deg": float(np.degrees(tilt_angle(np.asarray(inst["rotation"]))))}
-            out.append(PointCloudSample(points[pick].astype(np.float32), gt["rotation"].astype(np.float32), None, meta))
+            out.append(PointCloudSample(points[pick].astype(np.float32), gt["rotation"].astype(np.float32),
+                                        colors[pick], meta))
     return out

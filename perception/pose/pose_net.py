@@ -113,13 +113,26 @@ def load_weights(model: PoseNet, path: str | Path) -> None:
     """Copy every weight stored at ``path`` into ``model`` (fine-tuning). The stored network
     must have ``model``'s shape (every :class:`PoseNetConfig` field but its input fields, e.g.
     ``depth_smoothing_px``, which a fine-tuning run may change), else
-    :class:`CheckpointMismatchError`."""
+    :class:`CheckpointMismatchError`.
+
+    One widening is allowed: an xyz network (``use_rgb=False``) may start an xyz + RGB one of
+    a backbone that names its ``input_weight``. The colour columns of that weight start at
+    zero, so the new network begins as exactly the stored one and learns what colour adds."""
     payload = read_checkpoint(path)
     stored = PoseNetConfig.from_dict(payload["config"])
-    shape = [f.name for f in dataclasses.fields(PoseNetConfig) if f.name not in PoseNetConfig.INPUT_FIELDS]
+    state = payload["state_dict"]
+    widen = not stored.use_rgb and model.config.use_rgb and hasattr(model.backbone, "input_weight")
+    shape = [f.name for f in dataclasses.fields(PoseNetConfig)
+             if f.name not in PoseNetConfig.INPUT_FIELDS and not (widen and f.name == "use_rgb")]
     _check_fields(path, stored, model.config, shape)
+    if widen:
+        key = f"backbone.{model.backbone.input_weight}"
+        xyz_only = state[key]
+        wide = torch.zeros(xyz_only.shape[0], model.config.in_channels, dtype=xyz_only.dtype)
+        wide[:, : xyz_only.shape[1]] = xyz_only
+        state = {**state, key: wide}
     try:
-        model.load_state_dict(payload["state_dict"])
+        model.load_state_dict(state)
     except RuntimeError as exc:
         raise CheckpointFormatError(f"{path}: weights do not fit config {stored} ({exc})") from exc
 

@@ -131,6 +131,8 @@ class PointTransformer(nn.Module):
     #: interleaved on 2 workers (batch of 100, 512 points): 2^17 / 2^18 / 2^19 floats gave
     #: 125 / 100 / 134 ms medians; at 1024 points 246 / 202 / 242 ms.
     chunk_elements: int = 1 << 18
+    #: The parameter that reads the input channels (xyz, then RGB), ``(d0, in_channels)``.
+    input_weight: str = "embed.0.weight"
 
     def __init__(
         self,

@@ -12,6 +12,9 @@ from torch import nn
 class PointNet(nn.Module):
     """Shared MLP ``in → 64 → 128 → 256`` per point, then max-pool to ``out_dim = 256``."""
 
+    #: The parameter that reads the input channels (xyz, then RGB), ``(widths[0], in_channels)``.
+    input_weight: str = "mlp.0.weight"
+
     def __init__(self, in_channels: int = 3, num_points: int = 1024, widths: tuple[int, ...] = (64, 128, 256)) -> None:
         super().__init__()
         layers: list[nn.Module] = []

@@ -46,3 +46,18 @@ def test_trimmed_training_clouds_lose_the_soil_their_masks_spilled_onto(small_da
         spilled, kept = spilled + w.meta["num_valid"] - truth, kept + t.meta["num_valid"] - truth
     # What stays lies on neighbours or beside the stem's foot, at the mushroom's own depth.
     assert kept < 0.4 * spilled
+
+
+def test_training_clouds_carry_the_colours_of_their_pixels(small_dataset):
+    root = small_dataset(1, 6, 21, (1.0, 0.0, 0.0))
+    scene = read_scene_files(root / scene_dirname(0))
+    detector = _SpillingDetector()
+    detector.labels = scene.labels_mushroom
+    samples = samples_from_detections(root, "train", detector, num_points=256)
+    rgb = scene.rgb.astype(np.float32) / 255.0
+    for s in samples:
+        assert s.colors.shape == s.points.shape and s.colors.dtype == np.float32
+        # Each point's colour is the RGB of the pixel its depth came from.
+        u = np.rint(s.points[:, 0] / s.points[:, 2] * scene.intrinsics.fx + scene.intrinsics.cx).astype(int)
+        v = np.rint(s.points[:, 1] / s.points[:, 2] * scene.intrinsics.fy + scene.intrinsics.cy).astype(int)
+        assert np.allclose(s.colors, rgb[v, u], atol=1e-6)

@@ -104,6 +104,37 @@ def test_load_weights_lets_the_input_fields_change_but_not_the_shape(tmp_path) -
     assert set(info.value.mismatches) == {"hidden"}
 
 
+@pytest.mark.parametrize("name", ["point_transformer", "pointnet"])
+def test_an_xyz_network_starts_an_rgb_one_that_predicts_what_it_did(tmp_path, name: str) -> None:
+    torch.manual_seed(0)
+    xyz_net = PoseNet(backbone=name, num_points=64).eval()
+    path = tmp_path / "xyz.pt"
+    save_checkpoint(path, xyz_net)
+    rgb_net = PoseNet(backbone=name, num_points=64, use_rgb=True).eval()
+    load_weights(rgb_net, path)
+    points = torch.rand(3, 64, 3) * 2 - 1
+    with torch.no_grad():
+        before = xyz_net(points)
+        for colours in (torch.zeros(3, 64, 3), torch.rand(3, 64, 3)):
+            assert torch.allclose(rgb_net(torch.cat([points, colours], -1)), before, atol=1e-6)
+    # The colour weights are real parameters that training can move.
+    weight = dict(rgb_net.named_parameters())[f"backbone.{rgb_net.backbone.input_weight}"]
+    assert weight.shape[1] == 6 and weight.requires_grad and torch.all(weight[:, 3:] == 0)
+
+
+def test_an_rgb_network_cannot_start_an_xyz_one_nor_pointnet2_widen(tmp_path) -> None:
+    torch.manual_seed(0)
+    path = tmp_path / "rgb.pt"
+    save_checkpoint(path, PoseNet(backbone="pointnet", num_points=64, use_rgb=True))
+    with pytest.raises(CheckpointMismatchError) as info:
+        load_weights(PoseNet(backbone="pointnet", num_points=64), path)
+    assert set(info.value.mismatches) == {"use_rgb"}
+    save_checkpoint(path, PoseNet(backbone="pointnet2", num_points=64))
+    with pytest.raises(CheckpointMismatchError) as info:
+        load_weights(PoseNet(backbone="pointnet2", num_points=64, use_rgb=True), path)
+    assert set(info.value.mismatches) == {"use_rgb"}
+
+
 def test_load_backbone_switches_the_head_and_names_mismatches(tmp_path) -> None:
     torch.manual_seed(0)
     trained = PoseNet(backbone="pointnet", head="6d", num_points=64)
