@@ -52,9 +52,9 @@ def estimate_cap_top(points: np.ndarray, axis: np.ndarray) -> np.ndarray:
     0``, fewer than 10 points, or a peak outside the band's reach) the apex is the centroid of
     the points within ``CAP_TOP_BAND_M`` of the top, raised to it.
 
-    Measured on the first 20 held-out 40-mushroom beds (shipped models; benchmarks/RESULTS.md,
-    session 26), mean distance to the true apex: 8.2 → 6.7 mm with ``--realism``, 4.5 → 3.9 mm
-    clean, against the top-band centroid. What remains follows the axis error: a dome's apex
+    Measured on the 50 held-out 40-mushroom beds of each camera (shipped models;
+    benchmarks/RESULTS.md, session 26), mean distance to the true apex: 8.2 → 6.7 mm with
+    ``--realism``, 4.6 → 4.3 mm clean, against the top-band centroid. What remains follows the axis error: a dome's apex
     along a wrong axis is where the surface faces that axis.
     """
     axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
