@@ -77,13 +77,20 @@ def _set_threads(threads: int | None) -> None:
 
 
 def _pipeline(args: argparse.Namespace):
-    """The pipeline ``--detector``/``--weights`` name, after printing the ``masks:`` line."""
+    """The pipeline ``--detector``/``--pose-model``/``--weights`` name, after printing the
+    ``masks:`` and ``axes:`` lines."""
     from perception.detection.load import describe_detector, load_detector
     from perception.errors import PerceptionConfigError
     from perception.pipeline import PosePipeline
+    from perception.pose.axis_cnn import AxisCNNEstimator
     from perception.pose.estimator import PoseEstimator
 
-    estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
+    if args.pose_model == "axis-cnn":
+        estimator = None
+        axis_model = AxisCNNEstimator.from_checkpoint(args.weights) if args.weights else AxisCNNEstimator.from_pretrained()
+    else:
+        estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
+        axis_model = None
     oracle = args.detector == "oracle"
     for flag in ("--soil-margin-mm", "--edge-tolerance-mm"):
         if oracle and getattr(args, flag[2:].replace("-", "_")) > 0:
@@ -93,10 +100,13 @@ def _pipeline(args: argparse.Namespace):
     soil = None if args.soil_margin_mm <= 0 else args.soil_margin_mm / 1000.0
     edge = None if args.edge_tolerance_mm <= 0 else args.edge_tolerance_mm / 1000.0
     print(f"masks: {describe_detector(args.detector)}")
-    sigma = estimator.config.depth_smoothing_px
-    print(f"clouds: depth smoothed in each mask, sigma {sigma:g} px (the network's setting)" if sigma > 0
-          else "clouds: raw depth")
-    return PosePipeline(estimator, detector, soil_margin_m=soil, edge_tolerance_m=edge), oracle
+    if axis_model is not None:
+        print(f"axes: axis CNN on RGB-D crops ({args.weights or 'shipped weights'})")
+    else:
+        sigma = estimator.config.depth_smoothing_px
+        print(f"axes: point network ({args.weights or 'shipped weights'}); clouds: " + (
+            f"depth smoothed in each mask, sigma {sigma:g} px (the network's setting)" if sigma > 0 else "raw depth"))
+    return PosePipeline(estimator, detector, soil_margin_m=soil, edge_tolerance_m=edge, axis_model=axis_model), oracle
 
 
 def cmd_train(args: argparse.Namespace) -> int:
@@ -178,7 +188,10 @@ def _pipeline_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--detector", default="shipped",
                    help="stage 1: 'shipped' (the shipped RGB-D segmenter, default), 'oracle' (MuJoCo's segmentation "
                         "masks) or a train-segmenter / train-detector checkpoint")
-    p.add_argument("--weights", help="pose-network checkpoint (default: the shipped weights)")
+    p.add_argument("--pose-model", choices=("axis-cnn", "points"), default="axis-cnn",
+                   help="stage 2: 'axis-cnn' (the shipped axis CNN on RGB-D crops, default) or 'points' (the point "
+                        "network on each mask's points)")
+    p.add_argument("--weights", help="checkpoint of the --pose-model network (default: its shipped weights)")
     p.add_argument("--score-threshold", type=float, default=None,
                    help="detections below this score are dropped (default: the detector's own)")
     p.add_argument("--soil-margin-mm", type=float, default=0.0,

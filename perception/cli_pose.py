@@ -193,8 +193,51 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
+    import hashlib
+
+    import torch
+
+    from perception.detection.load import SHIPPED_SEGMENTER, load_detector
+    from perception.errors import PerceptionConfigError
+    from perception.pose.train_axis_cnn import (
+        AxisTrainConfig,
+        CropSet,
+        cached_crops,
+        train_axis_cnn,
+    )
+
+    try:
+        config = AxisTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
+                                 time_limit_min=args.time_limit_min)
+    except PerceptionConfigError as exc:
+        print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
+        return 2
+    if args.threads is not None:
+        torch.set_num_threads(args.threads)
+    detector = load_detector(args.masks)
+    if detector is None:
+        print("sms3d train-axis-cnn: error: --masks must name a detector ('shipped' or a checkpoint), "
+              "not 'oracle'", file=sys.stderr)
+        return 2
+    weights = SHIPPED_SEGMENTER if args.masks == "shipped" else Path(args.masks)
+    detector_id = hashlib.sha256(weights.read_bytes()).hexdigest()[:16]
+    sets = {split: CropSet.concatenate([cached_crops(root, split, detector, detector_id, args.cache, progress=True)
+                                        for root in args.scenes]) for split in ("train", "val")}
+    print(f"crops: {len(sets['train'])} training, {len(sets['val'])} validation")
+    try:
+        best = train_axis_cnn(sets["train"], sets["val"], args.out, config, resume=args.resume,
+                              extra={"scenes": [str(r) for r in args.scenes], "masks": args.masks})
+    except PerceptionConfigError as exc:
+        print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"best epoch {best['epoch']}: validation mean axis error {best['val_mean_axis_deg']:.2f}° "
+          f"(median {best['val_median_axis_deg']:.2f}°) -> {Path(args.out) / 'best.pt'}")
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add ``train-pose`` and ``eval-pose`` to ``subparsers``."""
+    """Add ``train-pose``, ``eval-pose`` and ``train-axis-cnn`` to ``subparsers``."""
     p = subparsers.add_parser("train-pose", help="train the pose network on rendered single-mushroom views")
     p.add_argument("--out", required=True, help="output folder (checkpoints, log.csv)")
     net, train = PoseNetConfig(), TrainConfig()  # the flags' defaults are the configs'
@@ -270,6 +313,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     e.add_argument("--device", default="cpu")
     e.add_argument("--threads", type=int, default=2)
     e.set_defaults(func=cmd_eval)
+
+    a = subparsers.add_parser(
+        "train-axis-cnn", help="train the axis CNN (stage 2 from RGB-D crops) on a detector's masks of generated scenes")
+    a.add_argument("--out", required=True, help="output folder (best.pt, last.pt, log.csv)")
+    a.add_argument("--scenes", nargs="+", required=True,
+                   help="dataset folders written by `sms3d generate`: their train and val splits")
+    a.add_argument("--masks", default="shipped",
+                   help="whose masks are cropped: 'shipped' (the shipped RGB-D segmenter, default) or a detector checkpoint")
+    a.add_argument("--cache", help="folder for the crops of each dataset split (reused when they match)")
+    a.add_argument("--epochs", type=int, default=60)
+    a.add_argument("--batch-size", type=int, default=128)
+    a.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (warm-up, then cosine decay)")
+    a.add_argument("--seed", type=int, default=0)
+    a.add_argument("--threads", type=int, help="torch CPU threads (default: torch's own)")
+    a.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this many minutes")
+    a.add_argument("--resume", action="store_true", help="continue the run in --out from its last epoch")
+    a.set_defaults(func=cmd_train_axis_cnn)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -11,7 +11,7 @@ import numpy as np
 from generator.camera import Intrinsics
 from perception.depth_smoothing import smooth_depth_in_mask
 from perception.detection.detector import Detection, Detector
-from perception.errors import NoEstimate, PipelineInputError
+from perception.errors import NoEstimate, PerceptionConfigError, PipelineInputError
 from perception.pointcloud import (
     MIN_POINTS,
     check_cloud,
@@ -19,6 +19,7 @@ from perception.pointcloud import (
     depth_to_points,
     pinhole_intrinsics,
 )
+from perception.pose.axis_cnn import AxisCNNEstimator, rotation_from_axis
 from perception.pose.estimator import PoseEstimator
 
 #: The cloud's top along the axis is this percentile of the points' heights (robust to strays).
@@ -207,17 +208,37 @@ class PosePipeline:
     ``depth_smoothing_px`` smooths each mask's depth before its points are taken
     (:func:`~perception.depth_smoothing.smooth_depth_in_mask`); ``None``, the default, takes it
     from the network (``estimator.config.depth_smoothing_px``): a network is fed as it was trained.
+
+    ``axis_model`` (an :class:`~perception.pose.axis_cnn.AxisCNNEstimator`) reads each stem axis
+    from an RGB-D crop around the whole mask instead of the point network (``estimator`` may
+    then be ``None``; with neither, the pipeline only trims masks and refuses to estimate); the rotation's yaw about the axis is arbitrary, and the centre and cap
+    top still come from the mask's points. :meth:`shipped` builds the pipeline the package
+    ships: the shipped segmenter and the shipped axis CNN.
     """
 
-    def __init__(self, estimator: PoseEstimator, detector: Detector | str | None = "shipped", erode_px: int = 0,
+    def __init__(self, estimator: PoseEstimator | None, detector: Detector | str | None = "shipped", erode_px: int = 0,
                  soil_margin_m: float | None = None, edge_tolerance_m: float | None = None,
-                 depth_smoothing_px: float | None = None) -> None:
+                 depth_smoothing_px: float | None = None, axis_model: AxisCNNEstimator | None = None) -> None:
         self.estimator = estimator
+        self.axis_model = axis_model
         self._detector = detector
         self.erode_px = erode_px
         self.soil_margin_m = soil_margin_m
         self.edge_tolerance_m = edge_tolerance_m
         self.depth_smoothing_px = depth_smoothing_px
+
+    @classmethod
+    def shipped(cls, detector: Detector | str | None = "shipped", **kwargs) -> PosePipeline:
+        """The shipped pipeline: ``detector`` (default the shipped RGB-D segmenter) and the
+        shipped axis CNN (``perception/weights/axis_cnn``); ``kwargs`` as for the constructor."""
+        from perception.pose.axis_cnn import AxisCNNEstimator
+
+        return cls(None, detector, axis_model=AxisCNNEstimator.from_pretrained(), **kwargs)
+
+    @property
+    def min_points(self) -> int:
+        """Fewest valid points a mask needs for an estimate."""
+        return self.estimator.min_points if self.estimator is not None else MIN_POINTS
 
     def trim_mask(self, mask: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """A detection's mask as the pose cloud is cut from it: eroded by ``erode_px``, then
@@ -237,7 +258,7 @@ class PosePipeline:
         mask = self.trim_mask(mask, depth)
         sigma = self.depth_smoothing_px
         if sigma is None:
-            sigma = self.estimator.config.depth_smoothing_px
+            sigma = self.estimator.config.depth_smoothing_px if self.estimator is not None else 0.0
         return mask, (smooth_depth_in_mask(depth, mask, sigma) if sigma > 0 else depth)
 
     @property
@@ -255,6 +276,9 @@ class PosePipeline:
         too-small or empty mask, or one whose points lie on a line, gives no estimate, never
         NaN). Pass ``detections`` to skip the detector (e.g. oracle masks from
         ``detections_from_labels``); ``intrinsics`` may be a 3x3 camera matrix."""
+        if self.estimator is None and self.axis_model is None:
+            raise PerceptionConfigError("estimator", "this pipeline only trims masks: give it a pose estimator or "
+                                                     "an axis_model to estimate")
         check_inputs(rgb, depth, intrinsics, world_from_camera)
         if detections is None:
             if self.detector is None:
@@ -266,7 +290,7 @@ class PosePipeline:
             mask, cloud_depth = self.cloud_pixels(det.mask, depth)
             points, colors = depth_to_points(cloud_depth, intrinsics, mask, rgb)
             try:
-                check_cloud(points, self.estimator.min_points)
+                check_cloud(points, self.min_points)
             except NoEstimate:
                 continue
             clouds.append(points.astype(np.float64))
@@ -274,15 +298,22 @@ class PosePipeline:
             kept.append(det)
         if not clouds:
             return []
-        # Every cloud passed check_cloud above, so this raises no NoEstimate.
-        estimates = self.estimator.estimate_batch(clouds, colours if self.estimator.config.use_rgb else None)
+        if self.axis_model is not None:
+            axes = self.axis_model.estimate_axes(rgb, depth, [det.mask for det in kept], intrinsics)
+            found = [(det, points, rotation_from_axis(axis), points.mean(0), len(points))
+                     for det, points, axis in zip(kept, clouds, axes) if axis is not None]
+        else:
+            # Every cloud passed check_cloud above, so this raises no NoEstimate.
+            estimates = self.estimator.estimate_batch(clouds, colours if self.estimator.config.use_rgb else None)
+            found = [(det, points, est.rotation, est.centre, est.num_points)
+                     for det, points, est in zip(kept, clouds, estimates)]
         rot, trans = world_from_camera[:3, :3], world_from_camera[:3, 3]
         results = []
-        for det, points, est in zip(kept, clouds, estimates):
-            top = estimate_cap_top(points, est.rotation[:, 2])
+        for det, points, rotation, centre, num_points in found:
+            top = estimate_cap_top(points, rotation[:, 2])
             results.append(MushroomEstimate(
-                detection=det, rotation_cam=est.rotation, centre_cam=est.centre, cap_top_cam=top,
-                rotation_world=rot @ est.rotation, centre_world=rot @ est.centre + trans,
-                cap_top_world=rot @ top + trans, num_points=est.num_points,
+                detection=det, rotation_cam=rotation, centre_cam=centre, cap_top_cam=top,
+                rotation_world=rot @ rotation, centre_world=rot @ centre + trans,
+                cap_top_world=rot @ top + trans, num_points=num_points,
             ))
         return results

@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "show": "generator.dataset.cli",
     "train-pose": "perception.cli_pose",
     "eval-pose": "perception.cli_pose",
+    "train-axis-cnn": "perception.cli_pose",
     "train-segmenter": "perception.cli_detector",
     "train-detector": "perception.cli_detector",
     "eval-detector": "perception.cli_detector",

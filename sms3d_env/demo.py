@@ -43,21 +43,19 @@ PICKS = (
 
 def perception_picture(config: Any, seed: int, path: Path) -> int:
     """Render the bed from the overhead camera, run the shipped two-stage pipeline (RGB-D
-    segmenter, then pose network) and save the masks and estimated stem axes; returns the number
+    segmenter, then the axis CNN) and save the masks and estimated stem axes; returns the number
     of mushrooms estimated."""
     from generator import generate_scene
     from generator.dataset.render import SceneRenderer
     from generator.files import save_rgb_png
     from perception.pipeline import PosePipeline
     from perception.plots.masks_and_axes import draw_masks_and_axes
-    from perception.pose.estimator import PoseEstimator
 
     scene = generate_scene(config, seed)
     cam = scene.config.camera
     with SceneRenderer(cam.height, cam.width) as renderer:
         frame = renderer.render(scene, amodal=False)
-    estimates = PosePipeline(PoseEstimator.from_pretrained())(frame.rgb, frame.depth, frame.intrinsics,
-                                                              frame.world_from_camera)
+    estimates = PosePipeline.shipped()(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera)
     save_rgb_png(path, draw_masks_and_axes(frame.rgb, estimates, frame.intrinsics.matrix))
     return len(estimates)
 
@@ -81,7 +79,7 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
     save_preview(generate_scene(config, seed), out / "scene.png")
     print(f"bed of 25 mushrooms rendered: {out / 'scene.png'}")
     found = perception_picture(config, seed, out / "perception.png")
-    print(f"from pixels (shipped segmenter + pose network): {found} mushrooms estimated: {out / 'perception.png'}")
+    print(f"from pixels (shipped segmenter + axis CNN): {found} mushrooms estimated: {out / 'perception.png'}")
     rates = {}
     for label, source, name in PICKS:
         env = gym.make("SMS3DPick-v0", scene_config=config, render_mode="rgb_array", camera="side",

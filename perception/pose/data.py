@@ -174,6 +174,30 @@ def samples_from_scenes(
     return out
 
 
+def matched_detections(detections: list[Any], labels: np.ndarray, min_iou: float = 0.5) -> list[tuple[Any, int, float]]:
+    """``(detection, instance id, IoU)`` for each detection matched to a ground-truth mushroom of
+    the instance label image ``labels`` (id + 1 per pixel): best score first, each to the
+    not-yet-taken mushroom its mask overlaps best, with visible-mask IoU >= ``min_iou``."""
+    from perception.detection.detector import mask_iou
+
+    out = []
+    taken: set[int] = set()
+    for det in sorted(detections, key=lambda d: -d.score):
+        candidates = np.unique(labels[det.mask])
+        best, best_iou = None, min_iou
+        for value in candidates[candidates > 0]:
+            iid = int(value) - 1
+            if iid in taken:
+                continue
+            iou = mask_iou(det.mask, labels == value)
+            if iou >= best_iou:
+                best, best_iou = iid, iou
+        if best is not None:
+            taken.add(best)
+            out.append((det, best, best_iou))
+    return out
+
+
 def samples_from_detections(
     root: str | Path, split: str | None, detector: Any, num_points: int = 2048, seed: int = 0,
     min_iou: float = 0.5, progress: bool = False,
@@ -193,7 +217,6 @@ def samples_from_detections(
     from generator.dataset.readers import instance_in_camera, read_scene_files, scene_indices
     from generator.dataset.writer import scene_dirname
     from generator.geometry import tilt_angle
-    from perception.detection.detector import mask_iou
     from perception.pointcloud import depth_to_points
 
     root = Path(root)
@@ -205,21 +228,7 @@ def samples_from_detections(
     out = []
     for index in indices:
         s = read_scene_files(root / scene_dirname(index), verify=False)
-        detections = sorted(detector.detect(s.rgb, s.depth), key=lambda d: -d.score)
-        taken: set[int] = set()
-        for det in detections:
-            candidates = np.unique(s.labels_mushroom[det.mask])
-            best, best_iou = None, min_iou
-            for value in candidates[candidates > 0]:
-                iid = int(value) - 1
-                if iid in taken:
-                    continue
-                iou = mask_iou(det.mask, s.labels_mushroom == value)
-                if iou >= best_iou:
-                    best, best_iou = iid, iou
-            if best is None:
-                continue
-            taken.add(best)
+        for det, best, best_iou in matched_detections(detector.detect(s.rgb, s.depth), s.labels_mushroom, min_iou):
             mask, depth = (det.mask, s.depth) if cloud_pixels is None else cloud_pixels(det.mask, s.depth)
             points, colors = depth_to_points(depth, s.intrinsics, mask, s.rgb)
             if len(points) < MIN_POINTS:

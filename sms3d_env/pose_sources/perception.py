@@ -1,11 +1,11 @@
 """The ``"perception"`` pose source: the two-stage pipeline on the overhead camera's RGB-D.
 
 At reset the scene is rendered from its overhead camera (RGB, metric depth, instance labels),
-the detector's masks are cut out of the depth, and the pose network estimates each mushroom.
+the detector's masks are cut out of the image, and the shipped axis CNN estimates each stem axis.
 By default the masks are the shipped RGB-D segmenter's; the target's estimate is the one whose
 mask overlaps the target's visible mask best, with IoU >= 0.5 (a missed target is a fallback
 like an unestimated one). With ``detector="oracle"`` the masks come from MuJoCo's segmentation
-render, so that only the pose network's error reaches the picker (an ablation).
+render, so that only stage 2's error reaches the picker (an ablation).
 
 If the target gets no estimate (hidden, or fewer points than the network needs) the source
 falls back to an upright stem through the target's cap top — a flagged outcome, counted in
@@ -39,8 +39,8 @@ class PerceptionPose:
     """Callable pose source ``(scene, instance_id, rng) -> PoseEstimate`` using ``PosePipeline``.
 
     Args:
-        pipeline: a ``perception.pipeline.PosePipeline``; default: the shipped pose network behind
-            ``detector``. A pipeline without a detector (``detector=None``) gets oracle masks.
+        pipeline: a ``perception.pipeline.PosePipeline``; default: the shipped pipeline
+            (``PosePipeline.shipped``: the shipped axis CNN) behind ``detector``. A pipeline without a detector (``detector=None``) gets oracle masks.
         detector: stage 1 when no ``pipeline`` is given: ``"shipped"`` (default), ``"oracle"`` or
             a checkpoint path (``perception.detection.load.load_detector``).
         part: which oracle masks feed the network, ``"mushroom"`` (whole visible mushroom, what
@@ -66,9 +66,8 @@ class PerceptionPose:
     def _pipeline(self) -> Any:
         if self.pipeline is None:
             from perception.pipeline import PosePipeline
-            from perception.pose.estimator import PoseEstimator
 
-            self.pipeline = PosePipeline(PoseEstimator.from_pretrained(), self.detector)
+            self.pipeline = PosePipeline.shipped(self.detector)
         return self.pipeline
 
     def __call__(self, scene: Any, instance_id: int, rng: np.random.Generator) -> PoseEstimate:

@@ -200,14 +200,14 @@ _RESUME_DEFAULTS = {"picker": "scripted", "picker_sha256": None, "position_along
 
 
 def _pose_weights_digest(config: SweepConfig) -> str:
-    """SHA-256 (16 hex digits) of the weights the perception episodes use: the shipped pose
-    network, and the stage-1 detector's file unless it is the oracle."""
+    """SHA-256 (16 hex digits) of the weights the perception episodes use: the shipped axis
+    CNN, and the stage-1 detector's file unless it is the oracle."""
     import hashlib
 
     from perception.detection.load import SHIPPED_SEGMENTER
-    from perception.pose.estimator import default_weights_path
+    from perception.pose.axis_cnn import SHIPPED_AXIS_CNN
 
-    digest = hashlib.sha256(default_weights_path().read_bytes())
+    digest = hashlib.sha256(SHIPPED_AXIS_CNN.read_bytes())
     if config.perception_detector != "oracle":
         detector = SHIPPED_SEGMENTER if config.perception_detector == "shipped" else Path(config.perception_detector)
         if detector.is_file():  # a missing file is named when the episodes load it
@@ -437,7 +437,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--variants", nargs="+", default=["default"], choices=sorted(SENSITIVITY_VARIANTS),
                    help="physics settings to compare (sensitivity to unsourced assumptions)")
     p.add_argument("--perception-episodes", type=int, default=SweepConfig.perception_episodes,
-                   help="also run this many episodes with the perception pose source (shipped network)")
+                   help="also run this many episodes with the perception pose source (shipped segmenter and axis CNN)")
     p.add_argument("--perception-detector", default=SweepConfig.perception_detector,
                    help="stage 1 of the perception episodes: 'shipped' (the shipped RGB-D segmenter, default), "
                         "'oracle' (MuJoCo's segmentation masks) or a train-segmenter/train-detector checkpoint")

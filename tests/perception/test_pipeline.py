@@ -67,6 +67,32 @@ def test_one_estimate_per_visible_mushroom_and_frames_agree(frame_and_scene, pip
         assert np.linalg.norm(est.centre_world - truth.cap_obb.center) < truth.cap_diameter
 
 
+def test_an_axis_model_gives_each_estimate_its_axis_and_the_cap_top_follows_it(frame_and_scene):
+    from perception.pose.axis_cnn import AxisCNN, AxisCNNEstimator
+
+    frame, scene = frame_and_scene
+    axis_model = AxisCNNEstimator(AxisCNN())  # untrained: "along the ray, towards the camera"
+    detections = detections_from_labels(frame.labels_mushroom)
+    estimates = PosePipeline(None, None, axis_model=axis_model)(frame.rgb, frame.depth, frame.intrinsics,
+                                                                frame.world_from_camera, detections)
+    assert len(estimates) >= 8
+    axes = axis_model.estimate_axes(frame.rgb, frame.depth, [e.detection.mask for e in estimates], frame.intrinsics)
+    for est, axis in zip(estimates, axes):
+        assert np.allclose(est.rotation_cam[:, 2], axis, atol=1e-9)
+        assert np.allclose(est.rotation_cam.T @ est.rotation_cam, np.eye(3), atol=1e-9)
+        assert np.allclose(est.rotation_world, frame.world_from_camera[:3, :3] @ est.rotation_cam)
+        points, _ = depth_to_points(frame.depth, frame.intrinsics, est.detection.mask)
+        assert np.allclose(est.centre_cam, points.mean(0)) and est.num_points == len(points)
+        assert np.allclose(est.cap_top_cam, estimate_cap_top(points.astype(np.float64), axis))
+
+
+def test_a_pipeline_without_a_pose_estimator_or_axis_model_refuses_to_estimate(frame_and_scene):
+    frame, _ = frame_and_scene
+    with pytest.raises(PerceptionConfigError, match="estimator"):
+        PosePipeline(None, None)(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera,
+                                 detections_from_labels(frame.labels_mushroom))
+
+
 def test_no_detections_and_tiny_masks_give_no_estimates(frame_and_scene, pipeline):
     frame, _ = frame_and_scene
     assert pipeline(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera, []) == []
@@ -302,7 +328,7 @@ def test_eval_pipeline_names_how_its_clouds_are_cut(tmp_path, capsys):
     path = tmp_path / "smoothed.pt"
     save_checkpoint(path, PoseNet(PoseNetConfig(backbone="pointnet", num_points=64, hidden=16, depth_smoothing_px=3.0)))
     args = argparse.Namespace(weights=str(path), detector="oracle", soil_margin_mm=0.0, edge_tolerance_mm=0.0,
-                              score_threshold=None)
+                              score_threshold=None, pose_model="points")
     pipeline, oracle = _pipeline(args)
     out = capsys.readouterr().out
     assert oracle and "clouds: depth smoothed in each mask, sigma 3 px (the network's setting)" in out

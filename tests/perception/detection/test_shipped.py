@@ -13,6 +13,7 @@ from perception.detection.detector import detections_from_labels, mask_iou
 from perception.detection.load import SHIPPED_SEGMENTER, describe_detector, load_detector
 from perception.detection.rgbd_segmenter import RGBDSegmenter
 from perception.pipeline import PosePipeline
+from perception.pose.axis_cnn import SHIPPED_AXIS_CNN
 from perception.pose.estimator import PoseEstimator
 from sms3d_env.pose_sources import PerceptionPose
 
@@ -47,6 +48,7 @@ def test_the_pipeline_and_the_perception_source_default_to_the_shipped_segmenter
     assert PosePipeline(pipeline.estimator, "oracle").detector is None
     source = PerceptionPose()
     assert isinstance(source._pipeline().detector, RGBDSegmenter)
+    assert source._pipeline().axis_model.path == SHIPPED_AXIS_CNN  # stage 2: the shipped axis CNN
     assert PerceptionPose(detector="oracle")._pipeline().detector is None
 
 

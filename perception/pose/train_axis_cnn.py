@@ -1,0 +1,229 @@
+"""Training the axis CNN (``axis_cnn``) on crops cut out by a stage-1 detector's masks.
+
+``crops_from_detections`` renders nothing: it reads generated scenes (``sms3d generate``), runs
+the detector, matches its masks to the ground truth (``data.matched_detections``) and crops
+each matched mushroom (``depth_crops``), labelled with its true stem axis in the crop's ray
+frame. The crops of a dataset split are cached in one ``.npz`` (written atomically, remade when
+the detector's weights or the crop layout change).
+
+``train_axis_cnn`` fits the network on the training splits' crops with the loss ``1 - cos``
+between predicted and true axes, one random quarter turn and mirror (``dihedral``) per batch,
+AdamW, a linear warm-up and cosine decay over the whole run; after every epoch it scores the
+validation splits (mean axis error, 8 dihedral views) and writes ``last.pt`` (resumable:
+weights, optimiser, epoch), ``best.pt`` (the network with the lowest validation error, in the
+shipped format) and ``log.csv``, all atomically. Batches are drawn from a generator seeded by
+``seed`` and the epoch, so a resumed run draws what the uninterrupted one would have.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import tempfile
+import time
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from perception.errors import NoEstimate, PerceptionConfigError
+from perception.pose.axis_cnn import AxisCNN, AxisCNNConfig, dihedral, predict_axes, save_axis_cnn
+from perception.pose.depth_crops import (
+    CROP_CHANNELS,
+    CROP_MARGIN,
+    CROP_PAD_PX,
+    CROP_SIZE,
+    crop_around_mask,
+)
+from perception.run_files import atomic_torch_save, learning_rate, write_log_csv
+
+#: Meta columns of a crop set.
+META_COLUMNS = ("scene_id", "instance_id", "mask_iou", "visible_fraction", "tilt_deg", "cap_diameter_mm")
+
+
+@dataclass(frozen=True)
+class AxisTrainConfig:
+    """Optimisation settings (``sms3d train-axis-cnn`` flags of the same names)."""
+
+    epochs: int = 60
+    batch_size: int = 128
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    warmup_iters: int = 500
+    seed: int = 0
+    time_limit_min: float | None = None
+
+    def __post_init__(self) -> None:
+        for name, least in (("epochs", 1), ("batch_size", 1), ("warmup_iters", 0)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < least:
+                raise PerceptionConfigError(name, f"must be an int >= {least}, got {value!r}")
+        for name, positive in (("lr", True), ("weight_decay", False)):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value) \
+                    or value < 0 or (positive and value == 0):
+                raise PerceptionConfigError(name, f"must be a finite number {'> 0' if positive else '>= 0'}, got {value!r}")
+        limit = self.time_limit_min
+        if limit is not None and (not isinstance(limit, (int, float)) or isinstance(limit, bool)
+                                  or not np.isfinite(limit) or limit <= 0):
+            raise PerceptionConfigError("time_limit_min", f"must be > 0 or None, got {self.time_limit_min!r}")
+
+
+@dataclass
+class CropSet:
+    """Crops ``(N, C, S, S)`` float16, ray-frame axes ``(N, 3)`` float32 and ``meta (N, 6)``
+    (``META_COLUMNS``)."""
+
+    crops: np.ndarray
+    axes: np.ndarray
+    meta: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.axes)
+
+    @classmethod
+    def concatenate(cls, sets: list[CropSet]) -> CropSet:
+        return cls(*(np.concatenate([getattr(s, f.name) for s in sets]) for f in dataclasses.fields(cls)))
+
+
+def crops_from_detections(root: str | Path, split: str | None, detector: Any, progress: bool = False) -> CropSet:
+    """The crops of every mushroom the ``detector`` finds (and matches) in a generated dataset's
+    ``split``; see the module doc."""
+    from generator.dataset.readers import read_scene_files, scene_indices
+    from generator.dataset.writer import scene_dirname
+    from generator.geometry import tilt_angle
+    from perception.pose.data import matched_detections
+
+    root = Path(root)
+    indices = scene_indices(root, split)
+    if progress:
+        from tqdm import tqdm
+
+        indices = tqdm(indices, desc=f"crops of {root.name}/{split}", unit="scene")
+    crops, axes, meta = [], [], []
+    for index in indices:
+        s = read_scene_files(root / scene_dirname(index), verify=False)
+        camera_from_world = np.asarray(s.world_from_camera)[:3, :3].T
+        visible = {a["instance_id"]: a.get("visible_fraction", 0.0) for a in s.annotations if a["category_id"] == 2}
+        instances = {inst["id"]: inst for inst in s.record["instances"]}
+        k = s.intrinsics
+        for det, iid, iou in matched_detections(detector.detect(s.rgb, s.depth), s.labels_mushroom):
+            try:
+                c = crop_around_mask(s.rgb, s.depth, det.mask, k.fx, k.fy, k.cx, k.cy)
+            except NoEstimate:
+                continue
+            rotation = np.asarray(instances[iid]["rotation"], dtype=np.float64)
+            crops.append(c.image.astype(np.float16))
+            axes.append(c.ray_from_camera @ camera_from_world @ rotation[:, 2])
+            meta.append((index, iid, iou, visible.get(iid, 0.0), np.degrees(tilt_angle(rotation)),
+                         1000.0 * instances[iid]["cap_diameter"]))
+    empty = np.zeros((0, CROP_CHANNELS, CROP_SIZE, CROP_SIZE), np.float16)
+    return CropSet(np.stack(crops) if crops else empty, np.array(axes, np.float32).reshape(-1, 3),
+                   np.array(meta, np.float64).reshape(-1, len(META_COLUMNS)))
+
+
+def cached_crops(root: str | Path, split: str, detector: Any, detector_id: str, cache: str | Path | None,
+                 progress: bool = False) -> CropSet:
+    """:func:`crops_from_detections`, read from ``cache`` when it holds the crops of the same
+    dataset, split and detector (``detector_id``: e.g. its weights' hash), else made and saved."""
+    made_with = json.dumps({"root": str(Path(root).resolve()), "split": split, "detector": detector_id,
+                            "crop": [CROP_SIZE, CROP_CHANNELS, CROP_MARGIN, CROP_PAD_PX]}, sort_keys=True)
+    path = None if cache is None else Path(cache) / f"axis_crops_{Path(root).name}_{split}.npz"
+    if path is not None and path.is_file():
+        try:
+            with np.load(path) as z:
+                if str(z["made_with"]) == made_with:
+                    return CropSet(z["crops"], z["axes"], z["meta"])
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
+            pass  # a cut-short or foreign file is made again
+    crop_set = crops_from_detections(root, split, detector, progress)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp.npz")
+        os.close(fd)
+        try:
+            np.savez(tmp, crops=crop_set.crops, axes=crop_set.axes, meta=crop_set.meta, made_with=made_with)
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+    return crop_set
+
+
+def axis_errors_deg(model: AxisCNN, crop_set: CropSet) -> np.ndarray:
+    """Per crop, the angle (degrees) between the estimated (8 views) and the true axis."""
+    predicted = predict_axes(model, torch.from_numpy(crop_set.crops))
+    cos = (predicted * torch.from_numpy(crop_set.axes)).sum(-1).clamp(-1.0, 1.0)
+    return torch.rad2deg(torch.arccos(cos)).numpy()
+
+
+def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTrainConfig | None = None,
+                   net: AxisCNNConfig | None = None, resume: bool = False, progress: bool = True,
+                   extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Fit an axis CNN (see the module doc); returns the best epoch's metrics."""
+    config = config or AxisTrainConfig()
+    if len(train) < config.batch_size:
+        raise PerceptionConfigError("batch_size", f"{config.batch_size} is more than the {len(train)} training crops")
+    if len(val) == 0:
+        raise PerceptionConfigError("val", "no validation crops")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(config.seed)
+    model = AxisCNN(net or AxisCNNConfig())
+    optimiser = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    rows: list[dict[str, Any]] = []
+    start_epoch, best = 0, {"val_mean_axis_deg": float("inf")}
+    state_path = out / "last.pt"
+    if resume and state_path.is_file():
+        state = torch.load(state_path, map_location="cpu", weights_only=True)
+        model.load_state_dict(state["model"])
+        optimiser.load_state_dict(state["optimiser"])
+        start_epoch, rows, best = state["epoch"], state["rows"], state["best"]
+    crops, axes = torch.from_numpy(train.crops), torch.from_numpy(train.axes)
+    steps = len(train) // config.batch_size
+    total = config.epochs * steps
+    deadline = None if config.time_limit_min is None else time.monotonic() + 60.0 * config.time_limit_min
+    epochs = range(start_epoch, config.epochs)
+    if progress:
+        from tqdm import tqdm
+
+        epochs = tqdm(epochs, desc="train-axis-cnn", unit="epoch", initial=start_epoch, total=config.epochs)
+    for epoch in epochs:
+        began = time.monotonic()
+        model.train()
+        draw = torch.Generator().manual_seed(config.seed * 100_003 + epoch)
+        order = torch.randperm(len(train), generator=draw)
+        losses = []
+        for step in range(steps):
+            for group in optimiser.param_groups:
+                group["lr"] = learning_rate(config, epoch * steps + step, total)
+            batch = order[step * config.batch_size:(step + 1) * config.batch_size]
+            turns, mirror = int(torch.randint(4, (1,), generator=draw)), bool(torch.randint(2, (1,), generator=draw))
+            x, target = dihedral(crops[batch].float(), axes[batch], turns, mirror)
+            loss = (1.0 - (model(x) * target).sum(-1)).mean()
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            losses.append(loss.item())
+        errors = axis_errors_deg(model, val)
+        row = {"epoch": epoch + 1, "lr": learning_rate(config, (epoch + 1) * steps - 1, total),
+               "train_loss": float(np.mean(losses)), "val_mean_axis_deg": float(errors.mean()),
+               "val_median_axis_deg": float(np.median(errors)), "epoch_s": time.monotonic() - began}
+        rows.append(row)
+        if row["val_mean_axis_deg"] < best["val_mean_axis_deg"]:
+            best = row
+            save_axis_cnn(out / "best.pt", model, {"metrics": row, "train": dataclasses.asdict(config), **(extra or {})})
+        atomic_torch_save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
+                           "rows": rows, "best": best}, state_path)
+        write_log_csv(out / "log.csv", rows)
+        if deadline is not None and time.monotonic() > deadline:
+            break
+    return best
+
+
+__all__ = ["AxisTrainConfig", "CropSet", "META_COLUMNS", "axis_errors_deg", "cached_crops", "crops_from_detections",
+           "train_axis_cnn"]

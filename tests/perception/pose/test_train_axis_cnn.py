@@ -1,0 +1,131 @@
+"""Training the axis CNN: crops labelled with the truth, the crop cache, a resumed run that
+draws what an uninterrupted one does, and the command's refusals."""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import hashlib
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+
+from generator.dataset.readers import read_scene_files, scene_indices
+from generator.dataset.writer import scene_dirname
+from perception.detection.detector import detections_from_labels
+from perception.errors import PerceptionConfigError
+from perception.pose.axis_cnn import load_axis_cnn
+from perception.pose.train_axis_cnn import (
+    AxisTrainConfig,
+    CropSet,
+    cached_crops,
+    crops_from_detections,
+    train_axis_cnn,
+)
+
+
+class _LabelDetector:
+    """Detections from each scene's own instance labels, looked up by its RGB image."""
+
+    def __init__(self, root):
+        self.labels, self.calls = {}, 0
+        for index in scene_indices(root, None):
+            s = read_scene_files(root / scene_dirname(index))
+            self.labels[hashlib.sha1(s.rgb.tobytes()).hexdigest()] = s.labels_mushroom
+
+    def detect(self, rgb, depth):
+        self.calls += 1
+        return detections_from_labels(self.labels[hashlib.sha1(rgb.tobytes()).hexdigest()])
+
+
+@pytest.fixture(scope="module")
+def beds(small_dataset):
+    root = small_dataset(4, 10, 31, (0.75, 0.25, 0.0))
+    return root, _LabelDetector(root)
+
+
+def test_crops_are_labelled_with_the_true_axis_in_their_ray_frame(beds) -> None:
+    root, detector = beds
+    crop_set = crops_from_detections(root, "train", detector)
+    assert len(crop_set) >= 15 and crop_set.crops.dtype == np.float16
+    from perception.pose.depth_crops import crop_around_mask
+
+    for row, axis in zip(crop_set.meta[:5], crop_set.axes[:5]):
+        s = read_scene_files(root / scene_dirname(int(row[0])))
+        inst = next(i for i in s.record["instances"] if i["id"] == int(row[1]))
+        mask = s.labels_mushroom == int(row[1]) + 1
+        k = s.intrinsics
+        crop = crop_around_mask(s.rgb, s.depth, mask, k.fx, k.fy, k.cx, k.cy)
+        true_cam = np.asarray(s.world_from_camera)[:3, :3].T @ np.asarray(inst["rotation"])[:, 2]
+        assert np.allclose(crop.ray_from_camera.T @ axis, true_cam, atol=1e-5)
+        assert row[2] == pytest.approx(1.0)  # the labels' own masks match with IoU 1
+
+
+def test_the_crop_cache_is_reused_for_the_same_detector_and_remade_otherwise(beds, tmp_path) -> None:
+    root, detector = beds
+    first = cached_crops(root, "val", detector, "a", tmp_path)
+    calls = detector.calls
+    again = cached_crops(root, "val", detector, "a", tmp_path)
+    assert detector.calls == calls and np.array_equal(again.crops, first.crops)
+    cached_crops(root, "val", detector, "b", tmp_path)
+    assert detector.calls > calls
+    (cache_file,) = tmp_path.glob("*.npz")
+    cache_file.write_bytes(cache_file.read_bytes()[:100])  # cut short, as by a kill
+    calls = detector.calls
+    assert np.array_equal(cached_crops(root, "val", detector, "b", tmp_path).axes, first.axes)
+    assert detector.calls > calls
+
+
+def test_a_resumed_run_ends_where_an_uninterrupted_one_does(beds, tmp_path) -> None:
+    root, detector = beds
+    train, val = crops_from_detections(root, "train", detector), crops_from_detections(root, "val", detector)
+    config = AxisTrainConfig(epochs=3, batch_size=8, warmup_iters=2)
+    torch.set_num_threads(1)
+    straight = train_axis_cnn(train, val, tmp_path / "straight", config, progress=False)
+    train_axis_cnn(train, val, tmp_path / "cut", AxisTrainConfig(epochs=3, batch_size=8, warmup_iters=2,
+                                                                 time_limit_min=1e-6), progress=False)
+    resumed = train_axis_cnn(train, val, tmp_path / "cut", config, resume=True, progress=False)
+    assert resumed["val_mean_axis_deg"] == pytest.approx(straight["val_mean_axis_deg"], abs=1e-9)
+    a = torch.load(tmp_path / "straight" / "last.pt", weights_only=True)["model"]
+    b = torch.load(tmp_path / "cut" / "last.pt", weights_only=True)["model"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    model, extra = load_axis_cnn(tmp_path / "straight" / "best.pt")
+    assert extra["metrics"]["val_mean_axis_deg"] == straight["val_mean_axis_deg"]
+    assert (tmp_path / "straight" / "log.csv").read_text().count("\n") == 4
+
+
+def test_too_small_a_training_set_is_refused(beds, tmp_path) -> None:
+    root, detector = beds
+    val = crops_from_detections(root, "val", detector)
+    with pytest.raises(PerceptionConfigError, match="batch_size"):
+        train_axis_cnn(val, val, tmp_path, AxisTrainConfig(batch_size=10_000), progress=False)
+    empty = CropSet(val.crops[:0], val.axes[:0], val.meta[:0])
+    with pytest.raises(PerceptionConfigError, match="val"):
+        train_axis_cnn(val, empty, tmp_path, AxisTrainConfig(batch_size=2), progress=False)
+
+
+@given(st.sampled_from(["epochs", "batch_size", "warmup_iters", "lr", "weight_decay", "time_limit_min"]),
+       st.sampled_from([0, -1, float("nan"), float("inf"), True, 2.5]))
+def test_bad_training_settings_name_their_field(name: str, value) -> None:
+    ok = {"epochs": 0 < value if type(value) is int else False, "batch_size": type(value) is int and value > 0,
+          "warmup_iters": type(value) is int and value >= 0,
+          "lr": type(value) in (int, float) and np.isfinite(value) and value > 0,
+          "weight_decay": type(value) in (int, float) and np.isfinite(value) and value >= 0,
+          "time_limit_min": type(value) in (int, float) and np.isfinite(value) and value > 0}[name]
+    if ok:
+        AxisTrainConfig(**{name: value})
+    else:
+        with pytest.raises(PerceptionConfigError, match=name):
+            AxisTrainConfig(**{name: value})
+
+
+def test_the_command_refuses_oracle_masks_and_bad_settings(tmp_path, capsys) -> None:
+    from sms3d_env.cli import main
+
+    assert main(["train-axis-cnn", "--out", str(tmp_path), "--scenes", str(tmp_path), "--masks", "oracle"]) == 2
+    assert "--masks" in capsys.readouterr().err
+    assert main(["train-axis-cnn", "--out", str(tmp_path), "--scenes", str(tmp_path), "--epochs", "0"]) == 2
+    assert "epochs" in capsys.readouterr().err
