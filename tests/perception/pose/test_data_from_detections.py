@@ -7,6 +7,7 @@ import dataclasses
 
 import cv2
 import numpy as np
+import pytest
 
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
@@ -28,11 +29,18 @@ class _SpillingDetector:
         return out
 
 
-def test_trimmed_training_clouds_lose_the_soil_their_masks_spilled_onto(small_dataset):
+@pytest.fixture(scope="module")
+def spilling_bed(small_dataset):
+    """A one-scene dataset, its scene, and a detector whose masks spill over its mushrooms."""
     root = small_dataset(1, 6, 21, (1.0, 0.0, 0.0))
     scene = read_scene_files(root / scene_dirname(0))
     detector = _SpillingDetector()
     detector.labels = scene.labels_mushroom
+    return root, scene, detector
+
+
+def test_trimmed_training_clouds_lose_the_soil_their_masks_spilled_onto(spilling_bed):
+    root, scene, detector = spilling_bed
     whole = samples_from_detections(root, "train", detector, num_points=256)
     trimmed = samples_from_detections(root, "train", detector, num_points=256,
                                       cloud_pixels=lambda m, d: (within_depth_of_core(m, d, 0.008), d))
@@ -48,11 +56,8 @@ def test_trimmed_training_clouds_lose_the_soil_their_masks_spilled_onto(small_da
     assert kept < 0.4 * spilled
 
 
-def test_training_clouds_carry_the_colours_of_their_pixels(small_dataset):
-    root = small_dataset(1, 6, 21, (1.0, 0.0, 0.0))
-    scene = read_scene_files(root / scene_dirname(0))
-    detector = _SpillingDetector()
-    detector.labels = scene.labels_mushroom
+def test_training_clouds_carry_the_colours_of_their_pixels(spilling_bed):
+    root, scene, detector = spilling_bed
     samples = samples_from_detections(root, "train", detector, num_points=256)
     rgb = scene.rgb.astype(np.float32) / 255.0
     for s in samples:
