@@ -226,8 +226,8 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
                                         for root in args.scenes]) for split in ("train", "val")}
     print(f"crops: {len(sets['train'])} training, {len(sets['val'])} validation")
     try:
-        best = train_axis_cnn(sets["train"], sets["val"], args.out, config, resume=args.resume,
-                              extra={"scenes": [str(r) for r in args.scenes], "masks": args.masks})
+        best = train_axis_cnn(sets["train"], sets["val"], args.out, config, resume=args.resume, init=args.init,
+                              extra={"scenes": [str(r) for r in args.scenes], "masks": args.masks, "init": args.init})
     except PerceptionConfigError as exc:
         print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
         return 2
@@ -328,6 +328,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     a.add_argument("--seed", type=int, default=0)
     a.add_argument("--threads", type=int, help="torch CPU threads (default: torch's own)")
     a.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this many minutes")
+    a.add_argument("--init", help="start from this axis-CNN checkpoint's weights (e.g. the shipped "
+                                  "perception/weights/axis_cnn/axis_cnn.pt) instead of the upright prior")
     a.add_argument("--resume", action="store_true", help="continue the run in --out from its last epoch")
     a.set_defaults(func=cmd_train_axis_cnn)
 

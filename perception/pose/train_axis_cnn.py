@@ -31,7 +31,14 @@ import numpy as np
 import torch
 
 from perception.errors import NoEstimate, PerceptionConfigError
-from perception.pose.axis_cnn import AxisCNN, AxisCNNConfig, dihedral, predict_axes, save_axis_cnn
+from perception.pose.axis_cnn import (
+    AxisCNN,
+    AxisCNNConfig,
+    dihedral,
+    load_axis_cnn,
+    predict_axes,
+    save_axis_cnn,
+)
 from perception.pose.depth_crops import (
     CROP_CHANNELS,
     CROP_MARGIN,
@@ -163,8 +170,9 @@ def axis_errors_deg(model: AxisCNN, crop_set: CropSet) -> np.ndarray:
 
 def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTrainConfig | None = None,
                    net: AxisCNNConfig | None = None, resume: bool = False, progress: bool = True,
-                   extra: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Fit an axis CNN (see the module doc); returns the best epoch's metrics."""
+                   extra: dict[str, Any] | None = None, init: str | Path | None = None) -> dict[str, Any]:
+    """Fit an axis CNN (see the module doc); returns the best epoch's metrics. ``init`` starts
+    from a saved network's weights (its shape wins over ``net``) instead of the upright prior."""
     config = config or AxisTrainConfig()
     if len(train) < config.batch_size:
         raise PerceptionConfigError("batch_size", f"{config.batch_size} is more than the {len(train)} training crops")
@@ -173,7 +181,7 @@ def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTr
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
-    model = AxisCNN(net or AxisCNNConfig())
+    model = load_axis_cnn(init)[0].train() if init is not None else AxisCNN(net or AxisCNNConfig())
     optimiser = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     rows: list[dict[str, Any]] = []
     start_epoch, best = 0, {"val_mean_axis_deg": float("inf")}

@@ -258,7 +258,7 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
             verdict = "within" if err <= tol else "beyond"
             lines.append(f"- {label}: {err}° — {verdict} the tolerable {tol:g}°.")
     if perception:
-        lines += ["", f"Perception pose source (the shipped pose network on the masks of the stage-1 detector "
+        lines += ["", f"Perception pose source (the shipped axis CNN on the masks of the stage-1 detector "
                       f"the sweep names, `--perception-detector`: the shipped RGB-D segmenter by default; "
                       f"`--perception-realism`: with the camera model): stem-axis error mean "
                       f"{perception['error_deg']:.1f}°, median {perception['median_error_deg']:.1f}°, 90th percentile "

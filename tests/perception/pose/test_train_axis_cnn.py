@@ -94,6 +94,10 @@ def test_a_resumed_run_ends_where_an_uninterrupted_one_does(beds, tmp_path) -> N
     assert all(torch.equal(a[k], b[k]) for k in a)
     model, extra = load_axis_cnn(tmp_path / "straight" / "best.pt")
     assert extra["metrics"]["val_mean_axis_deg"] == straight["val_mean_axis_deg"]
+    # A run started from a saved network begins from its weights, not the upright prior.
+    warm = train_axis_cnn(train, val, tmp_path / "warm", AxisTrainConfig(epochs=1, batch_size=8, lr=1e-12),
+                          progress=False, init=tmp_path / "straight" / "best.pt")
+    assert warm["val_mean_axis_deg"] == pytest.approx(straight["val_mean_axis_deg"], abs=0.2)
     assert (tmp_path / "straight" / "log.csv").read_text().count("\n") == 4
 
 
