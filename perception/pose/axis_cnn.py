@@ -197,9 +197,18 @@ class AxisCNNEstimator:
         boolean mask, or ``None`` for a mask with too few valid depth pixels. ``intrinsics``:
         anything :func:`~perception.pointcloud.pinhole_intrinsics` takes (an ``Intrinsics``, a
         3x3 camera matrix)."""
+        from perception.errors import PipelineInputError
         from perception.pointcloud import pinhole_intrinsics
 
         k = pinhole_intrinsics(intrinsics)
+        rgb, depth = np.asarray(rgb), np.asarray(depth)
+        if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+            raise PipelineInputError(f"rgb: expected (H, W, 3) uint8, got {rgb.shape} {rgb.dtype}")
+        if depth.shape != rgb.shape[:2] or not np.issubdtype(depth.dtype, np.floating):
+            raise PipelineInputError(f"depth: expected float metres of shape {rgb.shape[:2]}, got {depth.shape} {depth.dtype}")
+        bad = [i for i, m in enumerate(masks) if np.shape(m) != depth.shape]
+        if bad:
+            raise PipelineInputError(f"masks {bad}: expected shape {depth.shape}")
         crops, rays, index = [], [], []
         for i, mask in enumerate(masks):
             try:

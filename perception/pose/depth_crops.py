@@ -69,12 +69,13 @@ def ray_rotation(ray: np.ndarray) -> np.ndarray:
 
 def crop_around_mask(rgb: np.ndarray, depth: np.ndarray, mask: np.ndarray, fx: float, fy: float,
                      cx: float, cy: float) -> DepthCrop:
-    """The crop of ``rgb (H, W, 3)`` uint8 and metric ``depth (H, W)`` (0 = invalid) around the
+    """The crop of ``rgb (H, W, 3)`` uint8 and metric ``depth (H, W)`` (0, NaN = invalid) around the
     boolean ``mask (H, W)``, for a pinhole camera of focal lengths and principal point in pixels.
 
     Raises:
         NoEstimate: fewer than ``MIN_VALID_PIXELS`` valid depth pixels under the mask.
     """
+    depth = np.where(np.isfinite(depth), depth, 0.0)  # NaN / inf: invalid, like 0
     valid_mask = mask & (depth > 0)
     found = int(np.count_nonzero(valid_mask))
     if found < MIN_VALID_PIXELS:

@@ -11,7 +11,7 @@ import torch
 from hypothesis import given
 from hypothesis import strategies as st
 
-from perception.errors import CheckpointFormatError, PerceptionConfigError
+from perception.errors import CheckpointFormatError, PerceptionConfigError, PipelineInputError
 from perception.pose.axis_cnn import (
     SHIPPED_AXIS_CNN,
     AxisCNN,
@@ -100,6 +100,14 @@ def test_axes_come_back_in_the_camera_frame_and_thin_masks_get_none() -> None:
     ray = np.array([(500 - 319.5) / 382.0, (100 - 239.5) / 382.0, 1.0])
     assert np.allclose(axes[0], -ray / np.linalg.norm(ray), atol=1e-5)
     assert axes[1] is None
+    # Invalid depth as NaN is invalid depth, not a NaN axis.
+    holes = depth.copy()
+    holes[::3] = np.nan
+    assert np.isfinite(estimator.estimate_axes(np.zeros((480, 640, 3), np.uint8), holes, [disc], k)[0]).all()
+    with pytest.raises(PipelineInputError, match="rgb"):
+        estimator.estimate_axes(np.zeros((480, 640, 3)), depth, [disc], k)
+    with pytest.raises(PipelineInputError, match="masks"):
+        estimator.estimate_axes(np.zeros((480, 640, 3), np.uint8), depth, [disc[:10]], k)
 
 
 def test_the_shipped_network_reads_the_axes_of_a_rendered_bed(render_bed, monkeypatch) -> None:
