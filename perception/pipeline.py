@@ -210,10 +210,11 @@ class PosePipeline:
     from the network (``estimator.config.depth_smoothing_px``): a network is fed as it was trained.
 
     ``axis_model`` (an :class:`~perception.pose.axis_cnn.AxisCNNEstimator`) reads each stem axis
-    from an RGB-D crop around the whole mask instead of the point network (``estimator`` may
-    then be ``None``; with neither, the pipeline only trims masks and refuses to estimate); the rotation's yaw about the axis is arbitrary, and the centre and cap
-    top still come from the mask's points. :meth:`shipped` builds the pipeline the package
-    ships: the shipped segmenter and the shipped axis CNN.
+    from an RGB-D crop around the whole, untrimmed mask (as it was trained) instead of the point
+    network; ``estimator`` may then be ``None`` (with neither, the pipeline only trims masks and
+    refuses to estimate). The rotation's yaw about the axis is arbitrary; the centre and the cap
+    top still come from the (trimmed) mask's points. :meth:`shipped` builds the pipeline the
+    package ships: the shipped segmenter and the shipped axis CNN.
     """
 
     def __init__(self, estimator: PoseEstimator | None, detector: Detector | str | None = "shipped", erode_px: int = 0,
