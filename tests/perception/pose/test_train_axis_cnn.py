@@ -133,3 +133,12 @@ def test_the_command_refuses_oracle_masks_and_bad_settings(tmp_path, capsys) -> 
     assert "--masks" in capsys.readouterr().err
     assert main(["train-axis-cnn", "--out", str(tmp_path), "--scenes", str(tmp_path), "--epochs", "0"]) == 2
     assert "epochs" in capsys.readouterr().err
+
+
+def test_the_command_defaults_are_the_training_config_defaults() -> None:
+    from sms3d_env.cli import build_parser
+
+    args = build_parser("train-axis-cnn").parse_args(["train-axis-cnn", "--out", "x", "--scenes", "y"])
+    defaults = AxisTrainConfig()
+    assert (args.epochs, args.batch_size, args.lr, args.seed, args.time_limit_min) == (
+        defaults.epochs, defaults.batch_size, defaults.lr, defaults.seed, defaults.time_limit_min)
