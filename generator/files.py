@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import os
+import zipfile
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -26,3 +29,24 @@ def save_rgb_png(path: str | Path, image: np.ndarray) -> None:
     if not ok:
         raise OSError(f"cannot encode {path} as PNG")
     write_atomic(path, png.tobytes())
+
+
+def save_npz_atomic(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    """``arrays`` and ``meta`` (JSON) written to ``path`` through a temporary file and a rename, so
+    that a killed run leaves the old file or none, never half of one."""
+    path = Path(path)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays)
+    os.replace(tmp, path)
+
+
+def read_npz_made_with(path: str | Path, meta: dict[str, Any]) -> dict[str, np.ndarray] | None:
+    """``path``'s arrays if it was written (by ``save_npz_atomic``) with ``meta``; None if it is
+    missing, unreadable, cut short or made with other settings."""
+    try:
+        with np.load(path) as z:
+            if json.loads(str(z["__meta__"])) == meta:
+                return {k: z[k] for k in z.files if k != "__meta__"}
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
+        pass
+    return None

@@ -32,14 +32,6 @@ CAP_TOP_HUBER = 2.0
 CAP_TOP_BAND_M = 1e-3
 
 
-def _axis_frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors ``(u, v)`` that make a right-handed frame with the unit ``axis``."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(axis, helper)
-    u /= np.linalg.norm(u)
-    return u, np.cross(axis, u)
-
-
 def estimate_cap_top(points: np.ndarray, axis: np.ndarray) -> np.ndarray:
     """The cap's apex from a mushroom's observed ``points (N, 3)`` (metres) and its unit stem
     ``axis``: where a picker aims.
@@ -74,7 +66,7 @@ def _fit_dome_apex(points: np.ndarray, axis: np.ndarray) -> np.ndarray | None:
     :func:`estimate_cap_top`), or ``None`` where the points do not make a dome."""
     if len(points) < 10:
         return None
-    u_dir, v_dir = _axis_frame(axis)
+    u_dir, v_dir = rotation_from_axis(axis)[:, :2].T
     centre = points.mean(0)
     rel = points - centre
     u, v, h = rel @ u_dir, rel @ v_dir, rel @ axis

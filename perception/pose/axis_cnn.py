@@ -19,7 +19,6 @@ eight views' axes turned back (``dihedral``).
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -186,10 +185,6 @@ class AxisCNNEstimator:
     def from_pretrained(cls) -> AxisCNNEstimator:
         """The shipped network (``perception/weights/axis_cnn/axis_cnn.pt``)."""
         return cls.from_checkpoint(SHIPPED_AXIS_CNN)
-
-    def sha256(self) -> str | None:
-        """The checkpoint file's SHA-256 (16 hex digits), if it came from a file."""
-        return None if self.path is None else hashlib.sha256(self.path.read_bytes()).hexdigest()[:16]
 
     def estimate_axes(self, rgb: np.ndarray, depth: np.ndarray, masks: list[np.ndarray],
                       intrinsics: Any) -> list[np.ndarray | None]:

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from generator.geometry import axis_angle_matrix
 from perception.errors import NoEstimate
 
 #: Crop side in pixels.
@@ -54,17 +55,13 @@ class DepthCrop:
 
 def ray_rotation(ray: np.ndarray) -> np.ndarray:
     """The smallest rotation ``(3, 3)`` that takes the direction ``ray (3,)`` onto the optical
-    axis ``(0, 0, 1)`` (Rodrigues' formula about ``ray x z``)."""
+    axis ``(0, 0, 1)``: about ``ray x z`` by the angle between them."""
     ray = np.asarray(ray, dtype=np.float64)
     ray = ray / np.linalg.norm(ray)
-    z = np.array([0.0, 0.0, 1.0])
-    axis = np.cross(ray, z)
-    sin, cos = np.linalg.norm(axis), float(ray @ z)
-    if sin < 1e-12:
-        return np.eye(3) if cos > 0 else np.diag([1.0, -1.0, -1.0])
-    k = axis / sin
-    skew = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + sin * skew + (1.0 - cos) * skew @ skew
+    axis = np.cross(ray, [0.0, 0.0, 1.0])
+    if np.linalg.norm(axis) < 1e-12:
+        return np.eye(3) if ray[2] > 0 else np.diag([1.0, -1.0, -1.0])
+    return axis_angle_matrix(axis, float(np.arccos(np.clip(ray[2], -1.0, 1.0))))
 
 
 def crop_around_mask(rgb: np.ndarray, depth: np.ndarray, mask: np.ndarray, fx: float, fy: float,

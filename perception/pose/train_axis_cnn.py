@@ -3,8 +3,8 @@
 ``crops_from_detections`` renders nothing: it reads generated scenes (``sms3d generate``), runs
 the detector, matches its masks to the ground truth (``data.matched_detections``) and crops
 each matched mushroom (``depth_crops``), labelled with its true stem axis in the crop's ray
-frame. The crops of a dataset split are cached in one ``.npz`` (written atomically, remade when
-the detector's weights or the crop layout change).
+frame. The crops of a dataset split are cached in one ``.npz`` (``generator.files.save_npz_atomic``:
+written atomically; remade when the detector's weights or the crop layout change).
 
 ``train_axis_cnn`` fits the network on the training splits' crops with the loss ``1 - cos``
 between predicted and true axes, one random quarter turn and mirror (``dihedral``) per batch,
@@ -18,11 +18,7 @@ shipped format) and ``log.csv``, all atomically. Batches are drawn from a genera
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
-import tempfile
 import time
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,6 +26,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from generator.files import read_npz_made_with, save_npz_atomic
 from perception.errors import NoEstimate, PerceptionConfigError
 from perception.pose.axis_cnn import (
     AxisCNN,
@@ -137,27 +134,17 @@ def cached_crops(root: str | Path, split: str, detector: Any, detector_id: str, 
                  progress: bool = False) -> CropSet:
     """:func:`crops_from_detections`, read from ``cache`` when it holds the crops of the same
     dataset, split and detector (``detector_id``: e.g. its weights' hash), else made and saved."""
-    made_with = json.dumps({"root": str(Path(root).resolve()), "split": split, "detector": detector_id,
-                            "crop": [CROP_SIZE, CROP_CHANNELS, CROP_MARGIN, CROP_PAD_PX]}, sort_keys=True)
+    made_with = {"root": str(Path(root).resolve()), "split": split, "detector": detector_id,
+                 "crop": [CROP_SIZE, CROP_CHANNELS, CROP_MARGIN, CROP_PAD_PX]}
     path = None if cache is None else Path(cache) / f"axis_crops_{Path(root).name}_{split}.npz"
-    if path is not None and path.is_file():
-        try:
-            with np.load(path) as z:
-                if str(z["made_with"]) == made_with:
-                    return CropSet(z["crops"], z["axes"], z["meta"])
-        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
-            pass  # a cut-short or foreign file is made again
+    if path is not None:
+        arrays = read_npz_made_with(path, made_with)  # None: missing, cut short or other settings
+        if arrays is not None:
+            return CropSet(**arrays)
     crop_set = crops_from_detections(root, split, detector, progress)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp.npz")
-        os.close(fd)
-        try:
-            np.savez(tmp, crops=crop_set.crops, axes=crop_set.axes, meta=crop_set.meta, made_with=made_with)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
+        save_npz_atomic(path, {"crops": crop_set.crops, "axes": crop_set.axes, "meta": crop_set.meta}, made_with)
     return crop_set
 
 

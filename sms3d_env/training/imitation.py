@@ -23,15 +23,14 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
-import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from generator.files import read_npz_made_with, save_npz_atomic
 from sms3d_env.training.config import POSTURE_TARGETS, env_options
 
 TRAIN_ENV_ID = "SMS3DPickTrain-v0"
@@ -243,26 +242,6 @@ def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
 def collect_demonstrations(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
     """The scripted picker's successful episodes (DART noise), seeds ``cfg.seed ..``."""
     return _rollouts(cfg, range(cfg.seed, cfg.seed + cfg.episodes), progress=progress)
-
-
-def save_npz_atomic(path: Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
-    """``arrays`` and ``meta`` (JSON) written to ``path`` through a temporary file and a rename, so
-    that a killed run leaves the old file or none, never half of one."""
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays)
-    os.replace(tmp, path)
-
-
-def read_npz_made_with(path: Path, meta: dict[str, Any]) -> dict[str, np.ndarray] | None:
-    """``path``'s arrays if it was written (by ``save_npz_atomic``) with ``meta``; None if it is
-    missing, unreadable, cut short or made with other settings."""
-    try:
-        with np.load(path) as z:
-            if json.loads(str(z["__meta__"])) == meta:
-                return {k: z[k] for k in z.files if k != "__meta__"}
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile):
-        pass
-    return None
 
 
 def _load_or_make(path: Path, meta: dict[str, Any], make: Any) -> dict[str, np.ndarray]:

@@ -159,7 +159,7 @@ def label_episode(env: Any, seed: int, candidates: int) -> tuple[list[dict], lis
 
 def _label_chunk(cfg: TriggerConfig, first: int, path: str) -> str:
     """Label episodes ``first ..`` (a chunk) and write them to ``path`` atomically."""
-    from sms3d_env.training.imitation import save_npz_atomic
+    from generator.files import save_npz_atomic
 
     env = trigger_env(cfg)
     rows: dict[str, list[np.ndarray]] = {}
@@ -188,8 +188,8 @@ def collect_labels(cfg: TriggerConfig, progress: bool = True) -> dict[str, np.nd
     success of every episode (``scripted_success``, per episode, not per label)."""
     from tqdm.auto import tqdm
 
+    from generator.files import read_npz_made_with
     from generator.processes import worker_pool
-    from sms3d_env.training.imitation import read_npz_made_with
 
     folder = Path(cfg.out) / "labels"
     folder.mkdir(parents=True, exist_ok=True)
