@@ -17,6 +17,9 @@ BACKBONE_NAMES: tuple[str, ...] = ("point_transformer", "pointnet", "pointnet2")
 #: Rotation losses of the pose network (``perception.pose.rotations.rotation_loss``).
 ROTATION_LOSSES: tuple[str, ...] = ("geodesic", "axis", "geodesic+axis")
 
+#: Losses of the axis CNN (``perception.pose.train_axis_cnn.axis_loss``).
+AXIS_LOSSES: tuple[str, ...] = ("cosine", "angle")
+
 #: Mask R-CNN configurations (see :mod:`perception.detection.maskrcnn`).
 ARCHITECTURES = ("mobilenet_v3_fpn", "resnet50_fpn_v2")
 

@@ -22,7 +22,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from perception.choices import BACKBONE_NAMES, HEAD_NAMES, ROTATION_LOSSES
+from perception.choices import AXIS_LOSSES, BACKBONE_NAMES, HEAD_NAMES, ROTATION_LOSSES
 from perception.cli_detector import millimetres
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 from perception.pose.augment import AugmentConfig
@@ -209,7 +209,7 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
 
     try:
         config = AxisTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
-                                 time_limit_min=args.time_limit_min)
+                                 time_limit_min=args.time_limit_min, loss=args.loss)
     except PerceptionConfigError as exc:
         print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
         return 2
@@ -326,6 +326,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     a.add_argument("--batch-size", type=int, default=128)
     a.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (warm-up, then cosine decay)")
     a.add_argument("--seed", type=int, default=0)
+    a.add_argument("--loss", choices=AXIS_LOSSES, default="cosine",
+                   help="'cosine' (1 - cos) or 'angle' (the angle itself, what the mean axis error measures)")
     a.add_argument("--threads", type=int, help="torch CPU threads (default: torch's own)")
     a.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this many minutes")
     a.add_argument("--init", help="start from this axis-CNN checkpoint's weights (e.g. the shipped "

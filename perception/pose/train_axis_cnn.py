@@ -6,8 +6,8 @@ each matched mushroom (``depth_crops``), labelled with its true stem axis in the
 frame. The crops of a dataset split are cached in one ``.npz`` (``generator.files.save_npz_atomic``:
 written atomically; remade when the detector's weights or the crop layout change).
 
-``train_axis_cnn`` fits the network on the training splits' crops with the loss ``1 - cos``
-between predicted and true axes, one random quarter turn and mirror (``dihedral``) per batch,
+``train_axis_cnn`` fits the network on the training splits' crops with a loss between predicted
+and true axes (``axis_loss``), one random quarter turn and mirror (``dihedral``) per batch,
 AdamW, a linear warm-up and cosine decay over the whole run; after every epoch it scores the
 validation splits (mean axis error, 8 dihedral views) and writes ``last.pt`` (resumable:
 weights, optimiser, epoch), ``best.pt`` (the network with the lowest validation error, in the
@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from generator.files import read_npz_made_with, save_npz_atomic
+from perception.choices import AXIS_LOSSES
 from perception.errors import NoEstimate, PerceptionConfigError
 from perception.pose.axis_cnn import (
     AxisCNN,
@@ -60,8 +61,11 @@ class AxisTrainConfig:
     warmup_iters: int = 500
     seed: int = 0
     time_limit_min: float | None = None
+    loss: str = "cosine"
 
     def __post_init__(self) -> None:
+        if self.loss not in AXIS_LOSSES:
+            raise PerceptionConfigError("loss", f"must be one of {AXIS_LOSSES}, got {self.loss!r}")
         for name, least in (("epochs", 1), ("batch_size", 1), ("warmup_iters", 0)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < least:
@@ -148,6 +152,23 @@ def cached_crops(root: str | Path, split: str, detector: Any, detector_id: str, 
     return crop_set
 
 
+def axis_loss(predicted: torch.Tensor, target: torch.Tensor, kind: str = "cosine") -> torch.Tensor:
+    """The mean loss between unit axes ``predicted (B, 3)`` and ``target (B, 3)``.
+
+    ``"cosine"``: ``1 - cos``, which near zero is half the squared angle, so it weighs a crop by
+    its error and pulls an uncertain estimate towards the mean of the plausible axes. ``"angle"``:
+    the angle in radians (``atan2(|p x t|, p . t)``, smoothed at zero), the quantity the mean
+    axis error measures, which pulls it towards their median instead."""
+    dot = (predicted * target).sum(-1)
+    if kind == "cosine":
+        return (1.0 - dot).mean()
+    if kind == "angle":
+        # the 1e-12 keeps the gradient of |p x t| finite where the axes agree
+        sine = torch.linalg.cross(predicted, target).pow(2).sum(-1).add(1e-12).sqrt()
+        return torch.atan2(sine, dot).mean()
+    raise PerceptionConfigError("loss", f"must be one of {AXIS_LOSSES}, got {kind!r}")
+
+
 def axis_errors_deg(model: AxisCNN, crop_set: CropSet) -> np.ndarray:
     """Per crop, the angle (degrees) between the estimated (8 views) and the true axis."""
     predicted = predict_axes(model, torch.from_numpy(crop_set.crops))
@@ -199,7 +220,7 @@ def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTr
             batch = order[step * config.batch_size:(step + 1) * config.batch_size]
             turns, mirror = int(torch.randint(4, (1,), generator=draw)), bool(torch.randint(2, (1,), generator=draw))
             x, target = dihedral(crops[batch].float(), axes[batch], turns, mirror)
-            loss = (1.0 - (model(x) * target).sum(-1)).mean()
+            loss = axis_loss(model(x), target, config.loss)
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
@@ -220,5 +241,5 @@ def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTr
     return best
 
 
-__all__ = ["AxisTrainConfig", "CropSet", "META_COLUMNS", "axis_errors_deg", "cached_crops", "crops_from_detections",
+__all__ = ["AxisTrainConfig", "CropSet", "META_COLUMNS", "axis_errors_deg", "axis_loss", "cached_crops", "crops_from_detections",
            "train_axis_cnn"]

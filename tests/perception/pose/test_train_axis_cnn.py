@@ -21,6 +21,7 @@ from perception.pose.axis_cnn import load_axis_cnn
 from perception.pose.train_axis_cnn import (
     AxisTrainConfig,
     CropSet,
+    axis_loss,
     cached_crops,
     crops_from_detections,
     train_axis_cnn,
@@ -111,6 +112,24 @@ def test_too_small_a_training_set_is_refused(beds, tmp_path) -> None:
         train_axis_cnn(val, empty, tmp_path, AxisTrainConfig(batch_size=2), progress=False)
 
 
+@given(st.floats(0.0, 3.14), st.floats(-3.14, 3.14))
+def test_the_losses_are_the_angle_and_one_minus_its_cosine(angle: float, azimuth: float) -> None:
+    target = torch.tensor([[0.0, 0.0, 1.0]], dtype=torch.float64)
+    axis = [np.sin(angle) * np.cos(azimuth), np.sin(angle) * np.sin(azimuth), np.cos(angle)]
+    predicted = torch.tensor([axis], dtype=torch.float64, requires_grad=True)
+    assert axis_loss(predicted, target, "angle").item() == pytest.approx(angle, abs=1e-5)
+    assert axis_loss(predicted, target, "cosine").item() == pytest.approx(1.0 - np.cos(angle), abs=1e-9)
+    axis_loss(predicted, target, "angle").backward()
+    assert torch.isfinite(predicted.grad).all()  # finite where the axes agree too
+
+
+def test_an_unknown_loss_is_refused() -> None:
+    with pytest.raises(PerceptionConfigError, match="loss"):
+        AxisTrainConfig(loss="l2")
+    with pytest.raises(PerceptionConfigError, match="loss"):
+        axis_loss(torch.zeros(1, 3), torch.zeros(1, 3), "l2")
+
+
 @given(st.sampled_from(["epochs", "batch_size", "warmup_iters", "lr", "weight_decay", "time_limit_min"]),
        st.sampled_from([0, -1, float("nan"), float("inf"), True, 2.5]))
 def test_bad_training_settings_name_their_field(name: str, value) -> None:
@@ -140,5 +159,5 @@ def test_the_command_defaults_are_the_training_config_defaults() -> None:
 
     args = build_parser("train-axis-cnn").parse_args(["train-axis-cnn", "--out", "x", "--scenes", "y"])
     defaults = AxisTrainConfig()
-    assert (args.epochs, args.batch_size, args.lr, args.seed, args.time_limit_min) == (
-        defaults.epochs, defaults.batch_size, defaults.lr, defaults.seed, defaults.time_limit_min)
+    assert (args.epochs, args.batch_size, args.lr, args.seed, args.time_limit_min, args.loss) == (
+        defaults.epochs, defaults.batch_size, defaults.lr, defaults.seed, defaults.time_limit_min, defaults.loss)
