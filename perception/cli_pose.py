@@ -326,8 +326,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     a.add_argument("--batch-size", type=int, default=128)
     a.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (warm-up, then cosine decay)")
     a.add_argument("--seed", type=int, default=0)
-    a.add_argument("--loss", choices=AXIS_LOSSES, default="cosine",
-                   help="'cosine' (1 - cos) or 'angle' (the angle itself, what the mean axis error measures)")
+    a.add_argument("--loss", choices=AXIS_LOSSES, default="angle",
+                   help="'angle' (the angle itself, what the mean axis error measures; default) or 'cosine' (1 - cos)")
     a.add_argument("--threads", type=int, help="torch CPU threads (default: torch's own)")
     a.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this many minutes")
     a.add_argument("--init", help="start from this axis-CNN checkpoint's weights (e.g. the shipped "

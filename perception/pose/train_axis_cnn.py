@@ -61,7 +61,7 @@ class AxisTrainConfig:
     warmup_iters: int = 500
     seed: int = 0
     time_limit_min: float | None = None
-    loss: str = "cosine"
+    loss: str = "angle"
 
     def __post_init__(self) -> None:
         if self.loss not in AXIS_LOSSES:
@@ -152,7 +152,7 @@ def cached_crops(root: str | Path, split: str, detector: Any, detector_id: str, 
     return crop_set
 
 
-def axis_loss(predicted: torch.Tensor, target: torch.Tensor, kind: str = "cosine") -> torch.Tensor:
+def axis_loss(predicted: torch.Tensor, target: torch.Tensor, kind: str = "angle") -> torch.Tensor:
     """The mean loss between unit axes ``predicted (B, 3)`` and ``target (B, 3)``.
 
     ``"cosine"``: ``1 - cos``, which near zero is half the squared angle, so it weighs a crop by
