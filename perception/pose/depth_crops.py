@@ -59,10 +59,11 @@ def ray_rotation(ray: np.ndarray) -> np.ndarray:
     ray = np.asarray(ray, dtype=np.float64)
     ray = ray / np.linalg.norm(ray)
     axis = np.cross(ray, [0.0, 0.0, 1.0])
-    if np.linalg.norm(axis) < 1e-12:
+    sine = float(np.linalg.norm(axis))
+    if sine < 1e-12:
         return np.eye(3) if ray[2] > 0 else np.diag([1.0, -1.0, -1.0])
     # atan2 of sine and cosine, not arccos of the cosine: arccos loses half the digits near 0
-    return axis_angle_matrix(axis, float(np.arctan2(np.linalg.norm(axis), ray[2])))
+    return axis_angle_matrix(axis, float(np.arctan2(sine, ray[2])))
 
 
 def crop_around_mask(rgb: np.ndarray, depth: np.ndarray, mask: np.ndarray, fx: float, fy: float,
