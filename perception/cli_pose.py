@@ -199,7 +199,7 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
     import torch
 
     from perception.detection.load import SHIPPED_SEGMENTER, load_detector
-    from perception.errors import PerceptionConfigError
+    from perception.pose.axis_cnn import AxisCNNConfig, load_axis_cnn
     from perception.pose.train_axis_cnn import (
         AxisTrainConfig,
         CropSet,
@@ -210,7 +210,16 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
     try:
         config = AxisTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                                  time_limit_min=args.time_limit_min, loss=args.loss)
-    except PerceptionConfigError as exc:
+        net = None if args.width is None and args.hidden is None else AxisCNNConfig(
+            width=AxisCNNConfig.width if args.width is None else args.width,
+            hidden=AxisCNNConfig.hidden if args.hidden is None else args.hidden)
+        if net is not None and args.init is not None:  # before minutes of crop cutting
+            start = load_axis_cnn(args.init)[0].config
+            for name in ("width", "hidden"):
+                if getattr(net, name) < getattr(start, name):
+                    raise PerceptionConfigError(name, f"can only grow: {args.init} has {getattr(start, name)}, "
+                                                      f"asked for {getattr(net, name)}")
+    except (PerceptionConfigError, FileNotFoundError, CheckpointFormatError) as exc:
         print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
         return 2
     if args.threads is not None:
@@ -226,7 +235,7 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
                                         for root in args.scenes]) for split in ("train", "val")}
     print(f"crops: {len(sets['train'])} training, {len(sets['val'])} validation")
     try:
-        best = train_axis_cnn(sets["train"], sets["val"], args.out, config, resume=args.resume, init=args.init,
+        best = train_axis_cnn(sets["train"], sets["val"], args.out, config, net=net, resume=args.resume, init=args.init,
                               extra={"scenes": [str(r) for r in args.scenes], "masks": args.masks, "init": args.init})
     except PerceptionConfigError as exc:
         print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
@@ -332,6 +341,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     a.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this many minutes")
     a.add_argument("--init", help="start from this axis-CNN checkpoint's weights (e.g. the shipped "
                                   "perception/weights/axis_cnn/axis_cnn.pt) instead of the upright prior")
+    a.add_argument("--width", type=int, help="channels after the first conv block (default 32); with --init, "
+                                             "widen the initial network to this many, keeping its function (Net2Net)")
+    a.add_argument("--hidden", type=int, help="hidden units of the head (default 128); with --init, as --width")
     a.add_argument("--resume", action="store_true", help="continue the run in --out from its last epoch")
     a.set_defaults(func=cmd_train_axis_cnn)
 

@@ -44,6 +44,7 @@ from perception.pose.depth_crops import (
     CROP_SIZE,
     crop_around_mask,
 )
+from perception.pose.widen import widen_axis_cnn
 from perception.run_files import atomic_torch_save, learning_rate, write_log_csv
 
 #: Meta columns of a crop set.
@@ -180,7 +181,8 @@ def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTr
                    net: AxisCNNConfig | None = None, resume: bool = False, progress: bool = True,
                    extra: dict[str, Any] | None = None, init: str | Path | None = None) -> dict[str, Any]:
     """Fit an axis CNN (see the module doc); returns the best epoch's metrics. ``init`` starts
-    from a saved network's weights (its shape wins over ``net``) instead of the upright prior."""
+    from a saved network's weights instead of the upright prior; a ``net`` wider than it widens
+    it first, keeping its function (``widen.widen_axis_cnn``)."""
     config = config or AxisTrainConfig()
     if len(train) < config.batch_size:
         raise PerceptionConfigError("batch_size", f"{config.batch_size} is more than the {len(train)} training crops")
@@ -189,7 +191,13 @@ def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTr
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
-    model = load_axis_cnn(init)[0].train() if init is not None else AxisCNN(net or AxisCNNConfig())
+    if init is None:
+        model = AxisCNN(net or AxisCNNConfig())
+    else:
+        model = load_axis_cnn(init)[0]
+        if net is not None and (net.width, net.hidden) != (model.config.width, model.config.hidden):
+            model = widen_axis_cnn(model, net.width, net.hidden, seed=config.seed)
+    model.train()
     optimiser = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     rows: list[dict[str, Any]] = []
     start_epoch, best = 0, {"val_mean_axis_deg": float("inf")}

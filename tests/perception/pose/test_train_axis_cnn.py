@@ -17,7 +17,7 @@ from generator.dataset.readers import read_scene_files, scene_indices
 from generator.dataset.writer import scene_dirname
 from perception.detection.detector import detections_from_labels
 from perception.errors import PerceptionConfigError
-from perception.pose.axis_cnn import load_axis_cnn
+from perception.pose.axis_cnn import SHIPPED_AXIS_CNN, AxisCNNConfig, load_axis_cnn
 from perception.pose.train_axis_cnn import (
     AxisTrainConfig,
     CropSet,
@@ -99,6 +99,11 @@ def test_a_resumed_run_ends_where_an_uninterrupted_one_does(beds, tmp_path) -> N
     warm = train_axis_cnn(train, val, tmp_path / "warm", AxisTrainConfig(epochs=1, batch_size=8, lr=1e-12),
                           progress=False, init=tmp_path / "straight" / "best.pt")
     assert warm["val_mean_axis_deg"] == pytest.approx(straight["val_mean_axis_deg"], abs=0.2)
+    # A wider shape than the saved network's widens it, keeping what it had learnt.
+    wide = train_axis_cnn(train, val, tmp_path / "wide", AxisTrainConfig(epochs=1, batch_size=8, lr=1e-12),
+                          net=AxisCNNConfig(width=40, hidden=160), progress=False, init=tmp_path / "straight" / "best.pt")
+    assert load_axis_cnn(tmp_path / "wide" / "best.pt")[0].config == AxisCNNConfig(width=40, hidden=160)
+    assert wide["val_mean_axis_deg"] == pytest.approx(straight["val_mean_axis_deg"], abs=0.2)
     assert (tmp_path / "straight" / "log.csv").read_text().count("\n") == 4
 
 
@@ -152,6 +157,13 @@ def test_the_command_refuses_oracle_masks_and_bad_settings(tmp_path, capsys) -> 
     assert "--masks" in capsys.readouterr().err
     assert main(["train-axis-cnn", "--out", str(tmp_path), "--scenes", str(tmp_path), "--epochs", "0"]) == 2
     assert "epochs" in capsys.readouterr().err
+    # narrowing a saved network is refused before any crop is cut (the scenes folder is empty)
+    assert main(["train-axis-cnn", "--out", str(tmp_path), "--scenes", str(tmp_path), "--init", str(SHIPPED_AXIS_CNN),
+                 "--width", "16"]) == 2
+    assert "width: can only grow" in capsys.readouterr().err
+    assert main(["train-axis-cnn", "--out", str(tmp_path), "--scenes", str(tmp_path), "--init",
+                 str(tmp_path / "missing.pt"), "--width", "48"]) == 2
+    assert "missing.pt" in capsys.readouterr().err
 
 
 def test_the_command_defaults_are_the_training_config_defaults() -> None:
