@@ -198,6 +198,7 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
 
     import torch
 
+    from generator.dataset.errors import DatasetError
     from perception.detection.load import SHIPPED_SEGMENTER, load_detector
     from perception.pose.axis_cnn import AxisCNNConfig, load_axis_cnn
     from perception.pose.train_axis_cnn import (
@@ -210,13 +211,14 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
     try:
         config = AxisTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                                  time_limit_min=args.time_limit_min, loss=args.loss)
-        net = None if args.width is None and args.hidden is None else AxisCNNConfig(
-            width=AxisCNNConfig.width if args.width is None else args.width,
-            hidden=AxisCNNConfig.hidden if args.hidden is None else args.hidden)
-        if net is not None and args.init is not None:  # before minutes of crop cutting
-            start = load_axis_cnn(args.init)[0].config
+        net = None
+        if args.width is not None or args.hidden is not None:
+            # checked here, before minutes of crop cutting; an unset flag keeps --init's size
+            start = AxisCNNConfig() if args.init is None else load_axis_cnn(args.init)[0].config
+            net = AxisCNNConfig(width=start.width if args.width is None else args.width,
+                                hidden=start.hidden if args.hidden is None else args.hidden)
             for name in ("width", "hidden"):
-                if getattr(net, name) < getattr(start, name):
+                if args.init is not None and getattr(net, name) < getattr(start, name):
                     raise PerceptionConfigError(name, f"can only grow: {args.init} has {getattr(start, name)}, "
                                                       f"asked for {getattr(net, name)}")
     except (PerceptionConfigError, FileNotFoundError, CheckpointFormatError) as exc:
@@ -231,8 +233,12 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
         return 2
     weights = SHIPPED_SEGMENTER if args.masks == "shipped" else Path(args.masks)
     detector_id = hashlib.sha256(weights.read_bytes()).hexdigest()[:16]
-    sets = {split: CropSet.concatenate([cached_crops(root, split, detector, detector_id, args.cache, progress=True)
-                                        for root in args.scenes]) for split in ("train", "val")}
+    try:
+        sets = {split: CropSet.concatenate([cached_crops(root, split, detector, detector_id, args.cache, progress=True)
+                                            for root in args.scenes]) for split in ("train", "val")}
+    except DatasetError as exc:  # e.g. a --scenes folder that `sms3d generate` did not write
+        print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
+        return 2
     print(f"crops: {len(sets['train'])} training, {len(sets['val'])} validation")
     try:
         best = train_axis_cnn(sets["train"], sets["val"], args.out, config, net=net, resume=args.resume, init=args.init,
@@ -341,9 +347,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     a.add_argument("--time-limit-min", type=float, help="stop after the epoch that passes this many minutes")
     a.add_argument("--init", help="start from this axis-CNN checkpoint's weights (e.g. the shipped "
                                   "perception/weights/axis_cnn/axis_cnn.pt) instead of the upright prior")
-    a.add_argument("--width", type=int, help="channels after the first conv block (default 32); with --init, "
-                                             "widen the initial network to this many, keeping its function (Net2Net)")
-    a.add_argument("--hidden", type=int, help="hidden units of the head (default 128); with --init, as --width")
+    a.add_argument("--width", type=int, help="channels after the first conv block (default 32, or --init's); with "
+                                             "--init, widen that network to this many, keeping its function (Net2Net)")
+    a.add_argument("--hidden", type=int, help="hidden units of the head (default 128, or --init's); with --init, "
+                                              "as --width")
     a.add_argument("--resume", action="store_true", help="continue the run in --out from its last epoch")
     a.set_defaults(func=cmd_train_axis_cnn)
 

@@ -164,6 +164,12 @@ def test_the_command_refuses_oracle_masks_and_bad_settings(tmp_path, capsys) -> 
     assert main(["train-axis-cnn", "--out", str(tmp_path), "--scenes", str(tmp_path), "--init",
                  str(tmp_path / "missing.pt"), "--width", "48"]) == 2
     assert "missing.pt" in capsys.readouterr().err
+    # an unset --hidden keeps the saved network's, so growing the width alone passes the check and
+    # the command goes on to the scenes, where a folder without a dataset is named
+    assert main(["train-axis-cnn", "--out", str(tmp_path / "out"), "--scenes", str(tmp_path), "--init",
+                 str(SHIPPED_AXIS_CNN), "--width", str(load_axis_cnn(SHIPPED_AXIS_CNN)[0].config.width + 8)]) == 2
+    err = capsys.readouterr().err
+    assert "can only grow" not in err and "manifest.json" in err
 
 
 def test_the_command_defaults_are_the_training_config_defaults() -> None:
