@@ -207,6 +207,7 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
         cached_crops,
         train_axis_cnn,
     )
+    from perception.pose.widen import check_growth
 
     try:
         config = AxisTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
@@ -217,10 +218,8 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
             start = AxisCNNConfig() if args.init is None else load_axis_cnn(args.init)[0].config
             net = AxisCNNConfig(width=start.width if args.width is None else args.width,
                                 hidden=start.hidden if args.hidden is None else args.hidden)
-            for name in ("width", "hidden"):
-                if args.init is not None and getattr(net, name) < getattr(start, name):
-                    raise PerceptionConfigError(name, f"can only grow: {args.init} has {getattr(start, name)}, "
-                                                      f"asked for {getattr(net, name)}")
+            if args.init is not None:
+                check_growth(start, net.width, net.hidden)
     except (PerceptionConfigError, FileNotFoundError, CheckpointFormatError) as exc:
         print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
         return 2

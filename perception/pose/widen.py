@@ -30,6 +30,14 @@ def _conv_blocks(model: AxisCNN) -> list[tuple[nn.Conv2d, nn.BatchNorm2d]]:
     return [(block[0], block[1]) for block in model.features if isinstance(block, nn.Sequential)]
 
 
+def check_growth(old: AxisCNNConfig, width: int, hidden: int) -> None:
+    """Raise :class:`PerceptionConfigError` naming ``width`` or ``hidden`` where it is not an int
+    at least the ``old`` network's (a network can only be widened)."""
+    for name, value in (("width", width), ("hidden", hidden)):
+        if not isinstance(value, int) or isinstance(value, bool) or value < getattr(old, name):
+            raise PerceptionConfigError(name, f"can only grow: the network has {getattr(old, name)}, asked for {value!r}")
+
+
 def widen_axis_cnn(model: AxisCNN, width: int, hidden: int | None = None, seed: int = 0) -> AxisCNN:
     """A copy of ``model`` with ``width`` channels after its first block (and ``hidden`` head
     units; default: the model's) that computes the same function (see the module doc).
@@ -39,10 +47,7 @@ def widen_axis_cnn(model: AxisCNN, width: int, hidden: int | None = None, seed: 
     """
     old = model.config
     hidden = old.hidden if hidden is None else hidden
-    if not isinstance(width, int) or isinstance(width, bool) or width < old.width:
-        raise PerceptionConfigError("width", f"can only grow: the network has {old.width}, asked for {width!r}")
-    if not isinstance(hidden, int) or isinstance(hidden, bool) or hidden < old.hidden:
-        raise PerceptionConfigError("hidden", f"can only grow: the network has {old.hidden}, asked for {hidden!r}")
+    check_growth(old, width, hidden)
     wide = AxisCNN(AxisCNNConfig(width=width, hidden=hidden, crop_size=old.crop_size, channels=old.channels))
     draw = torch.Generator().manual_seed(seed)
     # source[j]: the old channel that new input channel j copies; share[j]: its part of that
@@ -71,4 +76,4 @@ def widen_axis_cnn(model: AxisCNN, width: int, hidden: int | None = None, seed: 
     return wide.train(model.training)
 
 
-__all__ = ["widen_axis_cnn"]
+__all__ = ["check_growth", "widen_axis_cnn"]
