@@ -153,11 +153,14 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_eval_pipeline(args: argparse.Namespace) -> int:
-    from perception.evaluation.eval_pipeline import evaluate_pipeline
+    from perception.evaluation.eval_pipeline import PipelineReport, evaluate_pipeline
 
     _set_threads(args.threads)
     pipeline, oracle = _pipeline(args)
-    report = evaluate_pipeline(pipeline, args.data, args.split, oracle, args.min_area, args.max_scenes, progress=True)
+    report = PipelineReport.pooled([evaluate_pipeline(pipeline, data, args.split, oracle, args.min_area, args.max_scenes,
+                                                      progress=True) for data in args.data])
+    if len(args.data) > 1:
+        print(f"pooled over {len(args.data)} datasets: {', '.join(args.data)}")
     print(report.markdown())
     if args.out:
         Path(args.out).write_text(json.dumps({"summary": report.summary(), "rows": report.rows}, indent=2), encoding="utf-8")
@@ -179,8 +182,12 @@ def cmd_show(args: argparse.Namespace) -> int:
     return 0
 
 
-def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, help="dataset folder written by `sms3d generate`")
+def _common(p: argparse.ArgumentParser, several: bool = False) -> None:
+    if several:
+        p.add_argument("--data", required=True, nargs="+", help="dataset folders written by `sms3d generate`; several "
+                                                                "are pooled into one report")
+    else:
+        p.add_argument("--data", required=True, help="dataset folder written by `sms3d generate`")
     p.add_argument("--threads", type=_positive_int, default=None, help="torch CPU threads (>= 1; default: torch's own)")
 
 
@@ -269,11 +276,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_clear_errors(cmd_eval))
 
     p = subparsers.add_parser("eval-pipeline", help="detection recall/precision and pose errors of the two-stage pipeline")
-    _common(p)
+    _common(p, several=True)
     _pipeline_args(p)
     p.add_argument("--split", choices=SPLITS, default="test")
     p.add_argument("--min-area", type=int, default=16)
-    p.add_argument("--max-scenes", type=_positive_int, help="evaluate only the first N scenes (N >= 1; default: all)")
+    p.add_argument("--max-scenes", type=_positive_int, help="evaluate only the first N scenes of each dataset (N >= 1; "
+                                                            "default: all)")
     p.add_argument("--out", help="also write summary and per-mushroom rows as JSON here")
     p.set_defaults(func=_clear_errors(cmd_eval_pipeline))
 

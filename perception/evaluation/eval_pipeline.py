@@ -6,7 +6,9 @@ the visible whole-mushroom masks; masks under ``min_area`` pixels are not counte
 true stem axes), the geodesic error of the full rotation, and the error of the estimated cap top
 (the point a picker aims at) in millimetres, in all and across the true stem axis; the angles
 are broken down by cap size, tilt and occlusion (the cap's visible fraction from the COCO
-annotations).
+annotations). Each mean comes with a 95 % interval that resamples whole scenes
+(``scene_bootstrap``): one bed's mushrooms share its soil and noise, so scenes, not mushrooms,
+are the independent draws. Reports of several datasets pool with ``PipelineReport.pooled``.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from generator.dataset.writer import scene_dirname
 from generator.geometry import tilt_angle
 from perception.detection.detector import detections_from_labels, mask_iou
 from perception.detection.detector_data import first_n
+from perception.evaluation.scene_bootstrap import scene_bootstrap_interval
 from perception.pipeline import MushroomEstimate, PosePipeline
 
 SIZE_BINS_MM = (0.0, 35.0, 50.0, 65.0, 200.0)
@@ -51,7 +54,8 @@ class GroundTruthMushroom:
 
 @dataclass
 class PipelineReport:
-    """Per-mushroom rows (``matched``: ground truth with its errors, or NaN errors when missed)."""
+    """Per-mushroom rows (``matched``: ground truth with its errors, or NaN errors when missed;
+    ``dataset`` and ``scene_id`` name its scene)."""
 
     scenes: int = 0
     estimates: int = 0
@@ -74,14 +78,30 @@ class PipelineReport:
     def precision(self) -> float:
         return self.matched / self.estimates if self.estimates else 0.0
 
+    @classmethod
+    def pooled(cls, reports: list[PipelineReport]) -> PipelineReport:
+        """One report over the scenes of several (e.g. one per dataset)."""
+        return cls(sum(r.scenes for r in reports), sum(r.estimates for r in reports), sum(r.seconds for r in reports),
+                   [row for r in reports for row in r.rows])
+
     def errors(self, key: str) -> np.ndarray:
         return np.array([r[key] for r in self.rows if r["matched"]])
 
+    def error_stats(self, key: str) -> dict[str, Any]:
+        """Mean, its 95 % scene-bootstrap interval (``None`` with one scene), median and 90th
+        percentile of the matched mushrooms' ``key``; empty without matches."""
+        values = self.errors(key)
+        if not values.size:
+            return {}
+        scenes = np.array([f"{r.get('dataset', '')}/{r['scene_id']}" for r in self.rows if r["matched"]])
+        interval = scene_bootstrap_interval(values, scenes)
+        return {"mean": float(values.mean()), "mean_ci95": None if interval is None else list(interval),
+                "median": float(np.median(values)), "p90": float(np.percentile(values, 90))}
+
     def summary(self) -> dict[str, Any]:
-        stat = lambda a: {"mean": float(a.mean()), "median": float(np.median(a)), "p90": float(np.percentile(a, 90))} if a.size else {}  # noqa: E731
         return {"scenes": self.scenes, "ground_truth": self.ground_truth, "estimates": self.estimates,
                 "matched": self.matched, "recall": self.recall, "precision": self.precision,
-                **{key: stat(self.errors(key)) for key in ERROR_KEYS},
+                **{key: self.error_stats(key) for key in ERROR_KEYS},
                 "seconds_per_scene": self.seconds / max(self.scenes, 1),
                 "by_cap_diameter_mm": self.breakdown("cap_diameter_mm", SIZE_BINS_MM),
                 "by_tilt_deg": self.breakdown("tilt_deg", TILT_BINS_DEG),
@@ -104,10 +124,12 @@ class PipelineReport:
                  f"recall {s['recall']:.3f}, precision {s['precision']:.3f}, "
                  f"{s['seconds_per_scene']:.2f} s per scene", ""]
         if s["axis_error_deg"]:
-            lines += ["| error of matched mushrooms | mean | median | 90th pct |", "|---|---:|---:|---:|"]
+            lines += ["| error of matched mushrooms | mean | mean's 95 % interval (scenes resampled) | median | 90th pct |",
+                      "|---|---:|---:|---:|---:|"]
             for name, label in ERROR_KEYS.items():
                 e = s[name]
-                lines.append(f"| {label} | {e['mean']:.1f} | {e['median']:.1f} | {e['p90']:.1f} |")
+                interval = "–" if e["mean_ci95"] is None else f"{e['mean_ci95'][0]:.2f}–{e['mean_ci95'][1]:.2f}"
+                lines.append(f"| {label} | {e['mean']:.2f} | {interval} | {e['median']:.1f} | {e['p90']:.1f} |")
         for title, key in (("cap diameter (mm)", "by_cap_diameter_mm"), ("tilt (°)", "by_tilt_deg"),
                            ("visible cap fraction", "by_visible_fraction")):
             lines += ["", f"| {title} | n | recall | mean axis ° | mean geodesic ° |", "|---|---:|---:|---:|---:|"]
@@ -183,5 +205,5 @@ def evaluate_pipeline(pipeline: PosePipeline, root: str | Path, split: str = "te
         report.seconds += time.perf_counter() - start
         report.scenes += 1
         report.estimates += len(estimates)
-        report.rows += match(estimates, ground_truth(sample, min_area))
+        report.rows += [{"dataset": str(root), **row} for row in match(estimates, ground_truth(sample, min_area))]
     return report

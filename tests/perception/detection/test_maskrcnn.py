@@ -4,6 +4,7 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -202,3 +203,17 @@ def test_oracle_pipeline_finds_every_mushroom_with_the_networks_error(beds, tmp_
     out = estimates_figure(sample, run_scene(pipeline, sample, oracle=True), tmp_path / "est.png")
     assert out.stat().st_size > 20_000
 
+
+
+def test_eval_pipeline_pools_several_datasets_with_a_scene_interval(beds, tmp_path, capsys):
+    other = tmp_path / "beds_copy"
+    shutil.copytree(beds, other)
+    out = tmp_path / "pooled.json"
+    assert cli_main(["eval-pipeline", "--data", str(beds), str(other), "--split", "train", "--detector", "oracle",
+                     "--threads", "1", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert f"pooled over 2 datasets: {beds}, {other}" in printed and "95 % interval (scenes resampled)" in printed
+    report = json.loads(out.read_text())
+    assert report["summary"]["scenes"] == 4 and {r["dataset"] for r in report["rows"]} == {str(beds), str(other)}
+    axis = report["summary"]["axis_error_deg"]
+    assert axis["mean_ci95"][0] <= axis["mean"] <= axis["mean_ci95"][1]
