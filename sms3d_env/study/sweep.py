@@ -192,8 +192,10 @@ def _run_and_save(task: Task, config: SweepConfig, parts: Path) -> str:
 
 # Settings that change what a part file holds without changing its name: a folder's parts can
 # only be reused by a sweep that agrees on them (errors, episodes and variants may grow).
-RESUME_KEYS = ("seed", "chunk", "env_kwargs", "perception_detector", "perception_realism", "picker",
-               "picker_sha256", "position_along_axis")
+RESUME_KEYS = ("seed", "chunk", "env_kwargs", "picker", "picker_sha256", "position_along_axis")
+# The same for the perception parts alone (the pose-error parts never see a camera), plus the
+# digest of the pose weights when the sweep asks for perception episodes.
+PERCEPTION_RESUME_KEYS = ("perception_detector", "perception_realism")
 # What a folder recorded before a key existed (its parts were made with this value).
 _RESUME_DEFAULTS = {"picker": "scripted", "picker_sha256": None, "position_along_axis": False,
                     "perception_realism": False}
@@ -244,8 +246,13 @@ def _read_json(path: Path, remedy: str) -> Any:
 def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
     # Only parts could be reused with the wrong settings: a folder without any (its sweep
     # stopped before a task finished) takes the new settings.
-    if not path.is_file() or not any(path.parent.glob("parts/*.json")):
+    if not any(path.parent.glob("parts/*.json")):
         return
+    if not path.is_file():
+        # Parts arrive without their settings when copied from another sweep; reusing them
+        # unchecked could mix episodes of other physics, pickers or pose weights.
+        raise ValueError(f"{path.parent} holds parts but no {path.name}, so their settings are unknown; copy the "
+                         f"{path.name} of the sweep that made them beside them, or use another --out")
     stored = _read_json(path, "remove the folder or use another --out")
     old_size = stored.get("num_mushrooms")
     if isinstance(old_size, int) and old_size != 25:
@@ -253,8 +260,10 @@ def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
         raise ValueError(f"{path.parent} holds a sweep of {old_size}-mushroom beds made before bed "
                          f"sizes were named in part files; use another --out")
     keys = list(RESUME_KEYS)
-    if any(path.parent.glob("parts/*_perception_*.json")) and requested["pose_weights_sha256"] is not None:
-        keys.append("pose_weights_sha256")  # perception parts made with other weights are stale
+    if any(path.parent.glob("parts/*_perception_*.json")):
+        keys += PERCEPTION_RESUME_KEYS
+        if requested["pose_weights_sha256"] is not None:
+            keys.append("pose_weights_sha256")  # perception parts made with other weights are stale
     differ = {k: (stored.get(k, _RESUME_DEFAULTS.get(k)), requested[k]) for k in keys
               if stored.get(k, _RESUME_DEFAULTS.get(k)) != requested[k]}
     if differ:

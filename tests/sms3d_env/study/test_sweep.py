@@ -146,6 +146,23 @@ def test_small_sweep_resumes_and_reports(tmp_path):
     (tmp_path / "sweep_config.json").write_text(json.dumps({**record, "num_mushrooms": 10}))
     with pytest.raises(ValueError, match="10-mushroom beds"):
         run_sweep(config, tmp_path, progress=False)
+    # Parts copied into another folder without their settings are refused, with the remedy; with
+    # the sweep_config.json beside them they are reused.
+    copy = tmp_path / "copy"
+    (copy / "parts").mkdir(parents=True)
+    for part in parts:
+        if part.exists() and "perception" not in part.name:
+            (copy / "parts" / part.name).write_text(part.read_text())
+    with pytest.raises(ValueError, match="holds parts but no sweep_config.json.*copy the sweep_config.json"):
+        run_sweep(config, copy, progress=False)
+    (copy / "sweep_config.json").write_text(json.dumps(record))
+    # Perception settings concern perception parts only: the copied pose-error parts serve a
+    # sweep with the camera model too (its perception episodes are run anew).
+    realism = dataclasses.replace(config, perception_realism=True)
+    copied = [r for r in run_sweep(realism, copy, progress=False) if r["source"] == "noisy"]
+    assert json.dumps(copied, sort_keys=True) == json.dumps(rows, sort_keys=True)
+    with pytest.raises(ValueError, match="perception_realism"):  # now its perception part is there
+        run_sweep(config, copy, progress=False)
     paths = write_report(rows + perception, tmp_path, "sms3d sweep ...")
     with open(paths["csv"]) as fh:
         assert len(list(csv.DictReader(fh))) == 5
