@@ -1,9 +1,10 @@
 """Axis-CNN inference speed: ms per mushroom and per bed, on the masks of a rendered bed.
 
 Renders one clean 640 x 480 bed (``--mushrooms``, seed ``--seed``), takes MuJoCo's masks, and
-times the shipped ``AxisCNNEstimator.estimate_axes`` (crops + 8-view network) on one mask and on
-all of them; medians over ``--repeats`` runs after a warm-up. Prints one Markdown table; run
-``python benchmarks/bench_axis_cnn.py``.
+times the shipped ``AxisCNNEstimator.estimate_axes`` (crops + 8-view network; ``--weights`` for
+another checkpoint, to compare two on one machine) on one mask and on all of them; medians over
+``--repeats`` runs after a warm-up. Prints one Markdown table; run
+``python benchmarks/bench_axis_cnn.py [--weights runs/axis_cnn12/best.pt]``.
 """
 
 from __future__ import annotations
@@ -42,13 +43,16 @@ def main() -> None:
     p.add_argument("--mushrooms", type=int, default=40)
     p.add_argument("--seed", type=int, default=424242)
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--weights", help="an axis-CNN checkpoint (default: the shipped one)")
     args = p.parse_args()
     scene = generate_scene(SceneConfig().replace(placement__num_mushrooms=args.mushrooms), seed=args.seed)
     with SceneRenderer(480, 640) as renderer:
         frame = renderer.render(scene, amodal=False)
     masks = [d.mask for d in detections_from_labels(frame.labels_mushroom) if d.area >= 20]
-    estimator = AxisCNNEstimator.from_pretrained()
-    print(f"torch={torch.__version__}, {len(masks)} masks of a {args.mushrooms}-mushroom bed, 8 views each\n")
+    estimator = AxisCNNEstimator.from_checkpoint(args.weights) if args.weights else AxisCNNEstimator.from_pretrained()
+    config = estimator.model.config
+    print(f"torch={torch.__version__}, {args.weights or 'shipped weights'} (width {config.width}, hidden "
+          f"{config.hidden}), {len(masks)} masks of a {args.mushrooms}-mushroom bed, 8 views each\n")
     print("| threads | ms / mushroom (one mask) | ms / bed (all masks) | ms / mushroom in the bed |")
     print("|---:|---:|---:|---:|")
     for threads in args.threads:
