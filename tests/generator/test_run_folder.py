@@ -1,0 +1,77 @@
+"""The output-folder rule every long-running command follows (generator.run_folder)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from generator.run_folder import SETTINGS_FILE, RunFolderError, differing_settings, open_run_folder
+
+
+def test_a_new_folder_records_its_settings(tmp_path):
+    run = open_run_folder(tmp_path / "run", {"lr": 1e-3, "sizes": (1, 2)})
+    assert not run.resumed
+    assert json.loads((tmp_path / "run" / SETTINGS_FILE).read_text()) == {"lr": 1e-3, "sizes": [1, 2]}
+
+
+def test_the_same_settings_resume_and_may_change_fields_are_updated(tmp_path):
+    open_run_folder(tmp_path, {"lr": 1e-3, "epochs": 2}, may_change=("epochs",))
+    (tmp_path / "last.pt").write_bytes(b"x")
+    run = open_run_folder(tmp_path, {"lr": 1e-3, "epochs": 5}, may_change=("epochs",))
+    assert run.resumed
+    assert json.loads((tmp_path / SETTINGS_FILE).read_text())["epochs"] == 5
+
+
+def test_other_settings_are_refused_naming_each_field_and_nothing_changes(tmp_path):
+    open_run_folder(tmp_path, {"lr": 1e-3, "seed": 0, "data": "a"})
+    before = (tmp_path / SETTINGS_FILE).read_bytes()
+    with pytest.raises(RunFolderError, match=r"data \('a' → 'b'\), lr \(0.001 → 0.01\)") as info:
+        open_run_folder(tmp_path, {"lr": 1e-2, "seed": 0, "data": "b"})
+    assert "--overwrite" in str(info.value) and str(tmp_path) in str(info.value)
+    assert (tmp_path / SETTINGS_FILE).read_bytes() == before
+
+
+def test_overwrite_starts_anew(tmp_path):
+    open_run_folder(tmp_path, {"lr": 1e-3})
+    (tmp_path / "model.zip").write_bytes(b"old")
+    run = open_run_folder(tmp_path, {"lr": 1e-2}, overwrite=True)
+    assert not run.resumed and not (tmp_path / "model.zip").exists()
+
+
+def test_a_folder_of_other_files_is_never_reused_silently(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(RunFolderError, match=SETTINGS_FILE):
+        open_run_folder(tmp_path, {"lr": 1e-3})
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_an_unreadable_record_is_named(tmp_path):
+    (tmp_path / SETTINGS_FILE).write_text("{cut")
+    with pytest.raises(RunFolderError, match="unreadable settings record"):
+        open_run_folder(tmp_path, {"lr": 1e-3})
+
+
+@pytest.mark.parametrize("out", ["", "  "])
+def test_an_empty_out_is_refused_by_flag(out):
+    with pytest.raises(RunFolderError, match="--out must name a folder"):
+        open_run_folder(out, {})
+
+
+def test_a_file_is_no_folder(tmp_path):
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(RunFolderError, match="--checkpoint-dir must be a folder"):
+        open_run_folder(tmp_path / "f", {}, flag="--checkpoint-dir")
+
+
+settings = st.dictionaries(st.text(min_size=1, max_size=5),
+                           st.one_of(st.integers(), st.floats(allow_nan=False), st.text(max_size=5), st.booleans(),
+                                     st.lists(st.integers(), max_size=3)), max_size=5)
+
+
+@given(settings, settings)
+def test_differing_settings_is_empty_exactly_when_the_records_agree(a, b):
+    assert (differing_settings(a, b) == []) == (json.loads(json.dumps(a)) == json.loads(json.dumps(b)))
+    assert differing_settings(a, b, may_change=set(a) | set(b)) == []
