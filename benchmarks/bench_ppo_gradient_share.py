@@ -30,6 +30,7 @@ import torch  # noqa: E402
 from sms3d_env.training import TrainConfig  # noqa: E402
 from sms3d_env.training.actor import observation_stats_path  # noqa: E402
 from sms3d_env.training.envs import vec_env  # noqa: E402
+from sms3d_env.training.model_files import ObservationStats  # noqa: E402
 
 
 def _grad_norm(model: torch.nn.Module, loss: torch.Tensor) -> float:
@@ -51,8 +52,8 @@ def gradient_share(run: Path, steps: int, seed: int) -> dict[str, float]:
     if cfg.algo != "ppo" or stats is None:
         raise SystemExit(f"{checkpoint}: needs a PPO checkpoint of a run trained with --normalize")
     env = vec_env(cfg.env_kwargs(), cfg.n_envs, seed, None, "dummy")
-    env = VecNormalize.load(str(stats), env)
-    env.training = False  # the checkpoint's statistics, as they were
+    env = VecNormalize(env, training=False, norm_reward=False)  # the checkpoint's statistics, as they were
+    ObservationStats.load(stats).apply_to(env)
     model = PPO.load(str(checkpoint), env=env, device="cpu")
 
     class _Continue(BaseCallback):

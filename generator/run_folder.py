@@ -73,18 +73,22 @@ def open_run_folder(out: str | Path, settings: Mapping[str, Any], *, overwrite: 
     - missing or empty: created, ``settings`` recorded; ``resumed=False``;
     - made with the same settings (``may_change`` aside, e.g. the number of epochs that extends a
       run): ``resumed=True``, the record updated to the new values of ``may_change``;
-    - made with other settings, or holding files without a settings record: ``RunFolderError``
-      naming the differing fields, unless ``overwrite``, which empties the folder first.
+    - made with other settings: ``RunFolderError`` naming the differing fields, unless
+      ``overwrite``, which empties the folder first;
+    - holding files without a settings record: ``RunFolderError`` (``overwrite`` never empties a
+      folder that no run made).
     """
     path = check_out_path(out, flag)
     wanted = _normalised(settings)
     record = path / SETTINGS_FILE
     if path.is_dir() and any(path.iterdir()):
+        if not record.is_file():
+            # Never emptied, even with ``overwrite``: ``--out . --overwrite`` must not delete a
+            # working folder.
+            raise RunFolderError(path, f"holds files but no {SETTINGS_FILE}, so it is no run of this command; "
+                                       f"use another {flag} (or empty it yourself)")
         if overwrite:
             shutil.rmtree(path)
-        elif not record.is_file():
-            raise RunFolderError(path, f"holds files but no {SETTINGS_FILE}, so it is no run of this command; "
-                                       f"use another {flag}, or --overwrite to empty it")
         else:
             try:
                 recorded = json.loads(record.read_text(encoding="utf-8"))

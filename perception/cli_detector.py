@@ -11,6 +11,8 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 from perception.choices import ARCHITECTURES, CATEGORIES
@@ -20,6 +22,12 @@ from perception.choices import ARCHITECTURES, CATEGORIES
 
 SPLITS = ("train", "val", "test")
 
+#: ``--out`` and ``--overwrite`` of every training command (``generator.run_folder``'s rule).
+RUN_FOLDER_HELP = ("run folder (last.pt, best.pt, log.csv, run_settings.json). Rerun with the same settings, the "
+                   "command resumes from the last finished epoch (more --epochs extend a run); other settings are "
+                   "refused, naming each")
+OVERWRITE_HELP = "empty --out and start anew, instead of resuming its run or refusing other settings"
+
 
 def _clear_errors(func):
     """Typed input errors become one line on stderr and exit code 2, not a traceback."""
@@ -27,7 +35,8 @@ def _clear_errors(func):
     def run(args: argparse.Namespace) -> int:
         # Imported when the command runs, not when ``register`` wraps it (perception.pipeline
         # loads torch).
-        from generator.dataset.errors import CorruptFileError
+        from generator.dataset.errors import DatasetError
+        from generator.run_folder import RunFolderError
         from perception.errors import (
             CheckpointFormatError,
             CheckpointMismatchError,
@@ -37,12 +46,50 @@ def _clear_errors(func):
 
         try:
             return func(args)
-        except (PerceptionConfigError, CheckpointFormatError, CheckpointMismatchError, CorruptFileError,
+        except (PerceptionConfigError, CheckpointFormatError, CheckpointMismatchError, DatasetError, RunFolderError,
                 PipelineInputError, FileNotFoundError, ImportError) as exc:
             print(f"sms3d {args.command}: error: {exc}", file=sys.stderr)
             return 2
 
     return run
+
+
+@contextmanager
+def flag_errors(flag: str) -> Iterator[None]:
+    """A file that ``flag`` names and that cannot be used (missing, unreadable, another network's)
+    is reported under the flag: ``PerceptionConfigError`` naming both."""
+    from perception.errors import (
+        CheckpointFormatError,
+        CheckpointMismatchError,
+        PerceptionConfigError,
+    )
+
+    try:
+        yield
+    except (FileNotFoundError, CheckpointFormatError, CheckpointMismatchError) as exc:
+        raise PerceptionConfigError(flag, str(exc)) from exc
+
+
+def check_datasets(flag: str, roots: Sequence[str | Path]) -> None:
+    """Every dataset folder ``flag`` names, checked before any is read, so that a mistyped last
+    one does not cost an evaluation or training of the others: each must hold a readable
+    ``manifest.json``, and none may be given twice (its scenes would count twice).
+    ``PerceptionConfigError`` naming the flag and the folder."""
+    from generator.dataset.errors import DatasetError
+    from generator.dataset.readers import scene_indices
+    from perception.errors import PerceptionConfigError
+
+    seen: dict[Path, str | Path] = {}
+    for root in roots:
+        folder = Path(root).resolve()
+        if folder in seen:
+            raise PerceptionConfigError(flag, f"{root} is given twice (as {seen[folder]} and {root}, one folder); "
+                                              "name each dataset once")
+        seen[folder] = root
+        try:
+            scene_indices(root, None)
+        except DatasetError as exc:
+            raise PerceptionConfigError(flag, f"{exc}: not a dataset written by `sms3d generate`") from exc
 
 
 def millimetres(text: str) -> float:
@@ -76,27 +123,31 @@ def _set_threads(threads: int | None) -> None:
     torch.set_num_threads(max(1, torch.get_num_threads()) if threads is None else threads)
 
 
-def _pipeline(args: argparse.Namespace):
+def _pipeline(args: argparse.Namespace, datasets: Sequence[str]):
     """The pipeline ``--detector``/``--pose-model``/``--weights`` name, after printing the
-    ``masks:`` and ``axes:`` lines."""
+    ``masks:`` and ``axes:`` lines. The flags, then the ``--data`` ``datasets``, are checked
+    before any network is loaded."""
     from perception.detection.load import describe_detector, load_detector
     from perception.errors import PerceptionConfigError
     from perception.pipeline import PosePipeline
     from perception.pose.axis_cnn import AxisCNNEstimator
     from perception.pose.estimator import PoseEstimator
 
-    if args.pose_model == "axis-cnn":
-        estimator = None
-        axis_model = AxisCNNEstimator.from_checkpoint(args.weights) if args.weights else AxisCNNEstimator.from_pretrained()
-    else:
-        estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
-        axis_model = None
     oracle = args.detector == "oracle"
     for flag in ("--soil-margin-mm", "--edge-tolerance-mm"):
         if oracle and getattr(args, flag[2:].replace("-", "_")) > 0:
             raise PerceptionConfigError(flag, "trims a detector's masks; MuJoCo's (--detector oracle) are exact")
+    check_datasets("--data", datasets)
+    with flag_errors("--weights"):
+        if args.pose_model == "axis-cnn":
+            estimator = None
+            axis_model = AxisCNNEstimator.from_checkpoint(args.weights) if args.weights else AxisCNNEstimator.from_pretrained()
+        else:
+            estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
+            axis_model = None
     overrides = {} if args.score_threshold is None else {"score_threshold": args.score_threshold}
-    detector = load_detector(args.detector, **overrides)
+    with flag_errors("--detector"):
+        detector = load_detector(args.detector, **overrides)
     soil = None if args.soil_margin_mm <= 0 else args.soil_margin_mm / 1000.0
     edge = None if args.edge_tolerance_mm <= 0 else args.edge_tolerance_mm / 1000.0
     print(f"masks: {describe_detector(args.detector)}")
@@ -110,37 +161,45 @@ def _pipeline(args: argparse.Namespace):
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    from generator.run_folder import check_out_path
     from perception.detection.maskrcnn_config import DetectorConfig, DetectorTrainConfig
     from perception.detection.train_detector import train_detector
 
+    check_out_path(args.out)
+    check_datasets("--data", [args.data])
     _set_threads(args.threads)
     config = DetectorConfig(arch=args.arch, category=args.category, min_size=args.min_size, max_size=args.max_size)
     train = DetectorTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                                 max_images=args.max_images, pretrained=args.pretrained, augment=not args.no_augment)
-    log = train_detector(args.data, args.out, config, train, resume=not args.restart, device=args.device)
+    log = train_detector(args.data, args.out, config, train, overwrite=args.overwrite, device=args.device)
     print(json.dumps(log[-1] if log else {}, indent=2))
     return 0
 
 
 def cmd_train_segmenter(args: argparse.Namespace) -> int:
+    from generator.run_folder import check_out_path
     from perception.detection.segmenter_config import SegmenterTrainConfig
     from perception.detection.train_segmenter import train_segmenter
 
+    check_out_path(args.out)
+    check_datasets("--data", args.data)
     _set_threads(args.threads)
     train = SegmenterTrainConfig(**{name: getattr(args, name) for name in _TRAIN_SEGMENTER_FIELDS})
-    log = train_segmenter(args.data, args.out, train=train, resume=not args.restart)
+    log = train_segmenter(args.data, args.out, train=train, overwrite=args.overwrite)
     print(json.dumps(log[-1] if log else {}, indent=2))
     return 0
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
+    from generator.files import write_atomic
     from perception.detection.detector_eval import evaluate_detector
     from perception.detection.load import describe_detector, load_detector
     from perception.errors import PerceptionConfigError
 
     _set_threads(args.threads)
     overrides = {} if args.score_threshold is None else {"score_threshold": args.score_threshold}
-    detector = load_detector(args.checkpoint, **overrides)
+    with flag_errors("--checkpoint"):
+        detector = load_detector(args.checkpoint, **overrides)
     if detector is None:
         raise PerceptionConfigError("--checkpoint", "'oracle' is the ground truth itself; name a detector")
     print(f"masks: {describe_detector(args.checkpoint)}")
@@ -148,22 +207,23 @@ def cmd_eval(args: argparse.Namespace) -> int:
                                args.min_area, detector.config.score_threshold, args.max_images, progress=True)
     print(report.markdown())
     if args.out:
-        Path(args.out).write_text(json.dumps(report.to_dict(), indent=2), encoding="utf-8")
+        write_atomic(args.out, json.dumps(report.to_dict(), indent=2))
     return 0
 
 
 def cmd_eval_pipeline(args: argparse.Namespace) -> int:
+    from generator.files import write_atomic
     from perception.evaluation.eval_pipeline import PipelineReport, evaluate_pipeline
 
     _set_threads(args.threads)
-    pipeline, oracle = _pipeline(args)
+    pipeline, oracle = _pipeline(args, args.data)
     report = PipelineReport.pooled([evaluate_pipeline(pipeline, data, args.split, oracle, args.min_area, args.max_scenes,
                                                       progress=True) for data in args.data])
     if len(args.data) > 1:
         print(f"pooled over {len(args.data)} datasets: {', '.join(args.data)}")
     print(report.markdown())
     if args.out:
-        Path(args.out).write_text(json.dumps({"summary": report.summary(), "rows": report.rows}, indent=2), encoding="utf-8")
+        write_atomic(args.out, json.dumps({"summary": report.summary(), "rows": report.rows}, indent=2))
     return 0
 
 
@@ -174,7 +234,7 @@ def cmd_show(args: argparse.Namespace) -> int:
     from perception.plots.show_estimates import estimates_figure
 
     _set_threads(args.threads)
-    pipeline, oracle = _pipeline(args)
+    pipeline, oracle = _pipeline(args, [args.data])
     sample = read_scene_files(Path(args.data) / scene_dirname(args.scene))
     estimates = run_scene(pipeline, sample, oracle)
     out = estimates_figure(sample, estimates, args.out, trim_mask=pipeline.trim_mask)
@@ -240,14 +300,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("train-segmenter", help="train the RGB-D segmenter (stage 1) on generated datasets (resumable)")
     p.add_argument("--data", required=True, nargs="+", help="dataset folders written by `sms3d generate` (train and val splits)")
     p.add_argument("--threads", type=_positive_int, default=None, help="torch CPU threads (>= 1; default: torch's own)")
-    p.add_argument("--out", required=True, help="run folder: last.pt, best.pt, log.csv")
+    p.add_argument("--out", required=True, help=RUN_FOLDER_HELP)
     _add_dataclass_flags(p, SegmenterTrainConfig, _TRAIN_SEGMENTER_FIELDS)
-    p.add_argument("--restart", action="store_true", help="ignore an existing last.pt instead of resuming")
+    p.add_argument("--overwrite", "--restart", action="store_true", help=f"{OVERWRITE_HELP} (--restart: the same)")
     p.set_defaults(func=_clear_errors(cmd_train_segmenter))
 
     p = subparsers.add_parser("train-detector", help="train Mask R-CNN on a dataset's COCO files (resumable)")
     _common(p)
-    p.add_argument("--out", required=True, help="run folder: last.pt, best.pt, log.csv")
+    p.add_argument("--out", required=True, help=RUN_FOLDER_HELP)
     net, train = DetectorConfig(), DetectorTrainConfig()  # the flags' defaults are the configs'
     p.add_argument("--arch", choices=ARCHITECTURES, default=net.arch)
     p.add_argument("--category", choices=tuple(CATEGORIES), default=net.category)
@@ -260,7 +320,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-images", type=_positive_int, help="use only the first N training images (N >= 1; default: all)")
     p.add_argument("--pretrained", action="store_true", help="start from torchvision weights already in the torch hub cache")
     p.add_argument("--no-augment", action="store_true", help="no random flips")
-    p.add_argument("--restart", action="store_true", help="ignore an existing last.pt instead of resuming")
+    p.add_argument("--overwrite", "--restart", action="store_true", help=f"{OVERWRITE_HELP} (--restart: the same)")
     p.add_argument("--device", default="cpu")
     p.set_defaults(func=_clear_errors(cmd_train))
 

@@ -23,7 +23,13 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from perception.choices import AXIS_LOSSES, BACKBONE_NAMES, HEAD_NAMES, ROTATION_LOSSES
-from perception.cli_detector import millimetres
+from perception.cli_detector import (
+    OVERWRITE_HELP,
+    RUN_FOLDER_HELP,
+    check_datasets,
+    flag_errors,
+    millimetres,
+)
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 from perception.pose.augment import AugmentConfig
 from perception.pose.config import PoseNetConfig, TrainConfig
@@ -76,22 +82,32 @@ def _samples(
     return samples
 
 
-def _scene_samples(args: argparse.Namespace, split: str, seed: int) -> list:
-    """Per-instance samples of every ``--scenes`` folder's ``split``, cut out by ``--masks``."""
-    from perception.pose.data import samples_from_detections, samples_from_scenes
+def _scene_detector(args: argparse.Namespace):
+    """The detector whose masks cut ``--scenes`` into clouds (None: the renderer's), after the
+    flags that depend on it are checked."""
+    from perception.detection.load import load_detector
 
     if args.masks == "oracle":
         for flag, given in (("--edge-tolerance-mm", args.edge_tolerance_mm),
                             ("--depth-smoothing-px", args.depth_smoothing_px)):
             if given:
                 raise PerceptionConfigError(flag, "cuts a detector's clouds; needs --masks shipped or a checkpoint")
-        return [s for root in args.scenes for s in samples_from_scenes(root, split, cap_only=args.cap_only, seed=seed)]
+        return None
     if args.cap_only:
         raise PerceptionConfigError("--cap-only", "needs --masks oracle (detectors find whole mushrooms)")
-    from perception.detection.load import load_detector
+    with flag_errors("--masks"):
+        return load_detector(args.masks)
+
+
+def _scene_samples(args: argparse.Namespace, detector, split: str, seed: int) -> list:
+    """Per-instance samples of every ``--scenes`` folder's ``split``, cut out by ``detector``'s
+    masks (None: the renderer's)."""
+    from perception.pose.data import samples_from_detections, samples_from_scenes
+
+    if detector is None:
+        return [s for root in args.scenes for s in samples_from_scenes(root, split, cap_only=args.cap_only, seed=seed)]
     from perception.pipeline import PosePipeline
 
-    detector = load_detector(args.masks)
     # The pipeline's own cut, without a network: the clouds are taken as it will take them.
     cut = PosePipeline(None, detector=None,  # type: ignore[arg-type]
                        edge_tolerance_m=args.edge_tolerance_mm / 1000.0 if args.edge_tolerance_mm > 0 else None,
@@ -101,14 +117,29 @@ def _scene_samples(args: argparse.Namespace, split: str, seed: int) -> list:
                                              cloud_pixels=cut.cloud_pixels)]
 
 
+def _check_out(args: argparse.Namespace) -> None:
+    """``--out`` checked before minutes of rendering or cropping, and with ``--resume`` it must
+    hold a run (a rerun resumes without the flag too; with it, a mistyped ``--out`` is refused
+    rather than started afresh)."""
+    from generator.run_folder import SETTINGS_FILE, check_out_path
+
+    out = check_out_path(args.out)
+    if args.resume and not (out / SETTINGS_FILE).is_file():
+        raise PerceptionConfigError("--resume", f"{out} holds no run to resume (no {SETTINGS_FILE}); drop --resume "
+                                                "to start one")
+
+
 def cmd_train(args: argparse.Namespace) -> int:
     import torch
 
+    from generator.run_folder import RunFolderError
     from perception.pose.data import PointCloudPoseDataset
+    from perception.pose.pose_net import PoseNet, load_backbone, load_weights
     from perception.pose.train import train
 
     torch.set_num_threads(args.threads)
     try:
+        _check_out(args)
         net = PoseNetConfig(backbone=args.backbone, head=args.head, use_rgb=args.rgb, num_points=args.num_points,
                             depth_smoothing_px=args.depth_smoothing_px)
         cfg = TrainConfig(
@@ -118,7 +149,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             select_by=args.select_by,
             augment=AugmentConfig(occlusion_prob=args.occlusion_prob, occlusion_fraction=tuple(args.occlusion_fraction)),
         )  # fmt: skip
-    except PerceptionConfigError as exc:
+    except (PerceptionConfigError, RunFolderError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     cache = Path(args.cache) if args.cache else None
@@ -132,13 +163,20 @@ def cmd_train(args: argparse.Namespace) -> int:
         print("error: --camera-model applies to rendered views: with --scenes add --add-synthetic N; "
               "drop --data / --val-data (their views were rendered already)", file=sys.stderr)
         return 2
+    try:  # every file named, checked before minutes of rendering or cutting
+        detector = _scene_detector(args) if args.scenes else None
+        if args.scenes:
+            check_datasets("--scenes", args.scenes)
+        for flag, path, load in (("--init", args.init, load_weights), ("--init-backbone", args.init_backbone, load_backbone)):
+            if path is not None:
+                with flag_errors(flag):
+                    load(PoseNet(net), path)
+    except PerceptionConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     if args.scenes:
-        try:
-            train_s = _scene_samples(args, "train", args.seed)
-            val_s = _scene_samples(args, "val", args.seed + 1)
-        except (PerceptionConfigError, CheckpointFormatError, FileNotFoundError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
+        train_s = _scene_samples(args, detector, "train", args.seed)
+        val_s = _scene_samples(args, detector, "val", args.seed + 1)
         if args.add_synthetic:
             train_s = train_s + _samples(
                 None, args.add_synthetic, args.seed * 1000 + 1, args.model_ids, cache, "train", args.procedural_models,
@@ -157,9 +195,9 @@ def cmd_train(args: argparse.Namespace) -> int:
     va = PointCloudPoseDataset(val_s, net.num_points, net.use_rgb, None, seed=args.seed + 1)
     t = time.perf_counter()
     try:
-        _, rows = train(net, cfg, tr, va, args.out, resume=args.resume, init=args.init,
+        _, rows = train(net, cfg, tr, va, args.out, overwrite=args.overwrite, init=args.init,
                         init_backbone=args.init_backbone)
-    except (CheckpointMismatchError, CheckpointFormatError, FileNotFoundError) as exc:
+    except (CheckpointMismatchError, CheckpointFormatError, FileNotFoundError, RunFolderError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     best = min(rows, key=lambda r: r["val_loss"]) if rows else {}
@@ -181,7 +219,14 @@ def cmd_eval(args: argparse.Namespace) -> int:
     torch.set_num_threads(args.threads)
 
     path = Path(args.checkpoint) if args.checkpoint else default_weights_path()
-    model, extra = load_checkpoint(path, map_location=args.device)
+    try:
+        with flag_errors("--checkpoint"):
+            model, extra = load_checkpoint(path, map_location=args.device)
+        if args.scenes:
+            check_datasets("--scenes", [args.scenes])
+    except PerceptionConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     net = model.config
     if args.scenes:
         samples = samples_from_scenes(args.scenes, args.split, cap_only=args.cap_only, seed=args.seed)
@@ -199,6 +244,7 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
     import torch
 
     from generator.dataset.errors import DatasetError
+    from generator.run_folder import RunFolderError
     from perception.detection.load import SHIPPED_SEGMENTER, load_detector
     from perception.pose.axis_cnn import AxisCNNConfig, load_axis_cnn
     from perception.pose.train_axis_cnn import (
@@ -209,40 +255,42 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
     )
     from perception.pose.widen import check_growth
 
+    # Every input is checked here, before minutes of crop cutting.
     try:
+        _check_out(args)
         config = AxisTrainConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, seed=args.seed,
                                  time_limit_min=args.time_limit_min, loss=args.loss)
-        net = None
-        if args.width is not None or args.hidden is not None:
-            # checked here, before minutes of crop cutting; an unset flag keeps --init's size
+        with flag_errors("--init"):
             start = AxisCNNConfig() if args.init is None else load_axis_cnn(args.init)[0].config
-            net = AxisCNNConfig(width=start.width if args.width is None else args.width,
-                                hidden=start.hidden if args.hidden is None else args.hidden)
-            if args.init is not None:
-                check_growth(start, net.width, net.hidden)
-    except (PerceptionConfigError, FileNotFoundError, CheckpointFormatError) as exc:
+        # an unset flag keeps --init's size
+        net = AxisCNNConfig(width=start.width if args.width is None else args.width,
+                            hidden=start.hidden if args.hidden is None else args.hidden)
+        if args.init is not None:
+            check_growth(start, net.width, net.hidden)
+        if args.masks == "oracle":
+            raise PerceptionConfigError("--masks", "must name a detector ('shipped' or a checkpoint), not 'oracle'")
+        check_datasets("--scenes", args.scenes)
+        with flag_errors("--masks"):
+            detector = load_detector(args.masks)
+    except (PerceptionConfigError, RunFolderError) as exc:
         print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
         return 2
     if args.threads is not None:
         torch.set_num_threads(args.threads)
-    detector = load_detector(args.masks)
-    if detector is None:
-        print("sms3d train-axis-cnn: error: --masks must name a detector ('shipped' or a checkpoint), "
-              "not 'oracle'", file=sys.stderr)
-        return 2
     weights = SHIPPED_SEGMENTER if args.masks == "shipped" else Path(args.masks)
     detector_id = hashlib.sha256(weights.read_bytes()).hexdigest()[:16]
     try:
         sets = {split: CropSet.concatenate([cached_crops(root, split, detector, detector_id, args.cache, progress=True)
                                             for root in args.scenes]) for split in ("train", "val")}
-    except DatasetError as exc:  # e.g. a --scenes folder that `sms3d generate` did not write
+    except DatasetError as exc:  # e.g. a scene file that is corrupt
         print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
         return 2
     print(f"crops: {len(sets['train'])} training, {len(sets['val'])} validation")
     try:
-        best = train_axis_cnn(sets["train"], sets["val"], args.out, config, net=net, resume=args.resume, init=args.init,
-                              extra={"scenes": [str(r) for r in args.scenes], "masks": args.masks, "init": args.init})
-    except PerceptionConfigError as exc:
+        best = train_axis_cnn(sets["train"], sets["val"], args.out, config, net=net, overwrite=args.overwrite,
+                              init=args.init, extra={"scenes": [str(Path(r).resolve()) for r in args.scenes],
+                                                     "masks": args.masks})
+    except (PerceptionConfigError, RunFolderError, CheckpointFormatError) as exc:
         print(f"sms3d train-axis-cnn: error: {exc}", file=sys.stderr)
         return 2
     print(f"best epoch {best['epoch']}: validation mean axis error {best['val_mean_axis_deg']:.2f}° "
@@ -250,10 +298,20 @@ def cmd_train_axis_cnn(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_folder_flags(p: argparse.ArgumentParser) -> None:
+    """``--out`` and how a rerun treats the run in it (``generator.run_folder``'s rule)."""
+    p.add_argument("--out", required=True, help=RUN_FOLDER_HELP)
+    rerun = p.add_mutually_exclusive_group()
+    rerun.add_argument("--resume", action="store_true",
+                       help="only continue the run in --out: refuse when it holds none (a rerun with the same "
+                            "settings resumes without this flag too)")
+    rerun.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``train-pose``, ``eval-pose`` and ``train-axis-cnn`` to ``subparsers``."""
     p = subparsers.add_parser("train-pose", help="train the pose network on rendered single-mushroom views")
-    p.add_argument("--out", required=True, help="output folder (checkpoints, log.csv)")
+    _run_folder_flags(p)
     net, train = PoseNetConfig(), TrainConfig()  # the flags' defaults are the configs'
     p.add_argument("--backbone", default=net.backbone, choices=BACKBONE_NAMES)
     p.add_argument("--head", default=net.head, choices=HEAD_NAMES)
@@ -294,7 +352,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu")
     p.add_argument("--threads", type=int, default=2)
-    p.add_argument("--resume", action="store_true", help="continue from OUT/last.pt")
     p.add_argument("--init", help="start from this checkpoint's weights (fine-tune; same network shape)")
     p.add_argument(
         "--init-backbone", metavar="CHECKPOINT",
@@ -330,12 +387,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     a = subparsers.add_parser(
         "train-axis-cnn", help="train the axis CNN (stage 2 from RGB-D crops) on a detector's masks of generated scenes")
-    a.add_argument("--out", required=True, help="output folder (best.pt, last.pt, log.csv)")
+    _run_folder_flags(a)
     a.add_argument("--scenes", nargs="+", required=True,
                    help="dataset folders written by `sms3d generate`: their train and val splits")
     a.add_argument("--masks", default="shipped",
                    help="whose masks are cropped: 'shipped' (the shipped RGB-D segmenter, default) or a detector checkpoint")
-    a.add_argument("--cache", help="folder for the crops of each dataset split (reused when they match)")
+    a.add_argument("--cache", help="folder for the crops of each dataset split (reused while the split's scenes, known "
+                                   "by the checksums `sms3d generate` recorded, and the detector are the same)")
     a.add_argument("--epochs", type=int, default=60)
     a.add_argument("--batch-size", type=int, default=128)
     a.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (warm-up, then cosine decay)")
@@ -350,7 +408,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                              "--init, widen that network to this many, keeping its function (Net2Net)")
     a.add_argument("--hidden", type=int, help="hidden units of the head (default 128, or --init's); with --init, "
                                               "as --width")
-    a.add_argument("--resume", action="store_true", help="continue the run in --out from its last epoch")
     a.set_defaults(func=cmd_train_axis_cnn)
 
 

@@ -25,7 +25,7 @@ class CheckpointMismatchError(ValueError):
 
 
 class CheckpointFormatError(ValueError):
-    """A file that is not a readable PoseNet checkpoint."""
+    """A file that is not a readable checkpoint of the network asked for (the message names it)."""
 
 
 class PipelineInputError(ValueError):

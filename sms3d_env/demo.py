@@ -60,9 +60,23 @@ def perception_picture(config: Any, seed: int, path: Path) -> int:
     return len(estimates)
 
 
+def check_demo_args(out: str | Path, seed: Any, episodes: Any) -> Path:
+    """``out`` as a folder path; :class:`~generator.errors.ConfigError` naming ``seed`` or
+    ``episodes`` unless they are integers >= 0 and >= 1, ``RunFolderError`` for an empty ``out``
+    or a file (before a minute of work, not after it)."""
+    from generator.errors import ConfigError
+    from generator.run_folder import check_out_path
+
+    for name, value, least in (("seed", seed, 0), ("episodes", episodes, 1)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            raise ConfigError(name, f"must be an integer >= {least}, got {value!r}")
+    return check_out_path(out)
+
+
 def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -> dict[str, float]:
     """Write ``scene.png``, ``perception.png`` (stage 1 masks and stage 2 axes) and a picker strip
-    per entry of ``PICKS`` into ``out``; return the success rate of each entry, by label."""
+    per entry of ``PICKS`` into ``out``; return the success rate of each entry, by label
+    (:func:`check_demo_args` checks the arguments first)."""
     import gymnasium as gym
     from tqdm.auto import tqdm
 
@@ -73,7 +87,7 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
     from sms3d_env.pickers.episode import run_episode
     from sms3d_env.pickers.scripted import ScriptedPicker
 
-    out = Path(out)
+    out = check_demo_args(out, seed, episodes)
     out.mkdir(parents=True, exist_ok=True)
     config = SceneConfig().replace(placement__num_mushrooms=25)
     save_preview(generate_scene(config, seed), out / "scene.png")
@@ -102,6 +116,24 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser("demo", help="generate and render a bed, estimate poses from its pixels, then pick with exact, "
                                                   "30°-wrong and estimated poses")
     p.add_argument("--out", default="sms3d_demo", help="folder for the pictures (default sms3d_demo)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--episodes", type=int, default=5, help="episodes per pose error")
-    p.set_defaults(func=lambda args: (run_demo(args.out, args.seed, args.episodes), 0)[1])
+    p.add_argument("--seed", type=int, default=0, help="the bed's and first episode's seed (>= 0)")
+    p.add_argument("--episodes", type=int, default=5, help="episodes per pose error (>= 1)")
+    p.set_defaults(func=_cmd)
+
+
+def _cmd(args: Any) -> int:
+    import sys
+
+    from generator.errors import ConfigError
+    from generator.run_folder import RunFolderError
+
+    try:
+        check_demo_args(args.out, args.seed, args.episodes)
+    except ConfigError as exc:
+        print(f"sms3d demo: error: argument --{exc.field}: {exc.message}", file=sys.stderr)
+        return 2
+    except RunFolderError as exc:
+        print(f"sms3d demo: error: {exc}", file=sys.stderr)
+        return 2
+    run_demo(args.out, args.seed, args.episodes)
+    return 0

@@ -30,6 +30,13 @@ def _finite(name: str, v: Any, lo: float, hi: float, what: str) -> None:
         raise ValueError(f"{name} must be {what}, got {v!r}")
 
 
+def _flag(name: str, v: Any) -> None:
+    """TypeError unless ``v`` is a bool (numpy's too): by truthiness, ``"no"`` or ``"false"``
+    would switch the option on."""
+    if not isinstance(v, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {type(v).__name__} {v!r}")
+
+
 def check_pregrasp_start(share: Any) -> None:
     _finite("pregrasp_start", share, 0.0, 1.0, "a probability in [0, 1]")
 
@@ -40,9 +47,12 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
                    image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
                    scene_config: Any, posture_target: Any = "estimate", pregrasp_start: Any = 0.0,
                    reach_lateral_weight: Any = 1.0, reward_pose: Any = "estimate",
-                   success_payoff: Any = "time_left") -> None:
+                   success_payoff: Any = "time_left", image_obs: Any = False, end_on_dead_end: Any = False,
+                   task_obs: Any = False) -> None:
     """Every check of the env's keyword arguments that needs no model (``tool`` is the resolved
     tool, ``robot.tool`` or the ``tool`` argument)."""
+    for name, v in (("image_obs", image_obs), ("end_on_dead_end", end_on_dead_end), ("task_obs", task_obs)):
+        _flag(name, v)
     if render_mode is not None and render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
     if reward_type not in REWARD_TYPES:

@@ -139,7 +139,8 @@ class SMS3DPickEnv(gym.Env):
             registered time limit, 250).
         scene_pool, pool_seed: > 0: draw each reset's bed from a pool of this many
             ``scene_config`` beds (seeds ``pool_seed ..``, each generated on first use and kept,
-            its compiled model cached per target) instead of generating a new one.
+            the compiled models of the most recently drawn beds and targets cached, at most
+            ``scene_source.MAX_CACHED_MODELS``) instead of generating a new one.
         posture_target: the IK's null-space posture: ``"estimate"`` (default) a pre-grasp
             configuration solved once per episode for the *estimated* axis; ``"tool"`` solved
             again whenever the tool axis turns more than 5 deg away from the axis of the last
@@ -225,7 +226,8 @@ class SMS3DPickEnv(gym.Env):
                        scene_config=scene_config, posture_target=posture_target,
                        pregrasp_start=pregrasp_start,
                        reach_lateral_weight=reach_lateral_weight, reward_pose=reward_pose,
-                       success_payoff=success_payoff)
+                       success_payoff=success_payoff, image_obs=image_obs,
+                       end_on_dead_end=end_on_dead_end, task_obs=task_obs)
         if tool is not None:
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
@@ -238,7 +240,7 @@ class SMS3DPickEnv(gym.Env):
         self.params = physics or PickPhysicsParams(cup_radius=self.robot_cfg.cup_radius)
         self.ctrl_cfg = controller or ControllerConfig()
         self.control_dt, self.substeps = float(control_dt), substeps
-        self.image_obs, self.image_size = image_obs, tuple(image_size)
+        self.image_obs, self.image_size = bool(image_obs), tuple(image_size)
         self.camera, self.render_size = camera, tuple(render_size)
         self.max_tilt_deg = max_tilt_deg
         self.free_radius = free_radius
@@ -249,7 +251,7 @@ class SMS3DPickEnv(gym.Env):
 
         self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
         self.home_q = np.asarray(self.robot_cfg.home_q, float)
-        self.reach = Reachability(self.ik.model, self.ik.arm_qadr, self.home_q)
+        self.reach = Reachability(self.ik.model, self.ik.site, self.ik.arm_qadr, self.home_q)
         self.action_space = spaces.Box(-1.0, 1.0, (7,), np.float32)
         self._twist_scale = np.repeat([self.ctrl_cfg.max_linear_speed, self.ctrl_cfg.max_angular_speed], 3)
         self._obs_sizes = {**_OBS_SIZES, **(TASK_OBS_SIZES if self.task_obs else {})}
@@ -322,7 +324,7 @@ class SMS3DPickEnv(gym.Env):
         for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
             mujoco.mj_step(m, d)
         self.picking.settled()
-        return self._obs(), {**self.picking.evaluate(), "start": self._start}
+        return self._obs(), {**self.picking.evaluate(), "start": self._start, "time_s": 0.0}
 
     def step(self, action: np.ndarray):
         if self.world is None:
@@ -362,7 +364,9 @@ class SMS3DPickEnv(gym.Env):
         truncated = ep.unstable
         self.done = terminated or truncated
         reward, terms = self._reward(info["is_success"])
-        info.update({f"reward_{k}": v for k, v in terms.items()}, start=self._start)
+        # time_s: simulated seconds since reset (at success, the pick's cycle time).
+        info.update({f"reward_{k}": v for k, v in terms.items()}, start=self._start,
+                    time_s=picking.steps * self.control_dt)
         if ep.unstable:
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
             mujoco.mj_forward(m, d)

@@ -14,8 +14,6 @@ import mujoco
 import numpy as np
 from scipy.optimize import least_squares
 
-from sms3d_env.robot import PREFIX, TOOL_SITE
-
 RULES = ("tallest", "largest", "index", "random")
 
 
@@ -26,9 +24,9 @@ class Reachability:
 
     cache_size = 8192
 
-    def __init__(self, model: mujoco.MjModel, arm_qadr: np.ndarray, home: np.ndarray) -> None:
+    def __init__(self, model: mujoco.MjModel, site: str, arm_qadr: np.ndarray, home: np.ndarray) -> None:
         self.model, self.data = model, mujoco.MjData(model)
-        self.site = model.site(PREFIX + TOOL_SITE).id
+        self.site = model.site(site).id
         self.qadr = arm_qadr
         jids = [int(model.dof_jntid[i]) for i in range(model.nv)]
         lo = np.full(len(arm_qadr), -2 * np.pi)

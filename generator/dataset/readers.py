@@ -125,6 +125,20 @@ def scene_indices(root: str | Path, split: str | None) -> list[int]:
         raise CorruptFileError(path, f"bad scene list ({exc})") from exc
 
 
+def dataset_checksum(root: str | Path, split: str | None = None) -> str:
+    """A SHA-256 of a dataset's complete scenes (of ``split``, or all) as the generator recorded
+    them: each one's index and ``DONE`` file, which holds the SHA-256 of each of its files. A
+    dataset regenerated at the same path (another seed, other settings) gets another one, the
+    same scenes the same one; it reads one small file per scene, not the images."""
+    root = Path(root)
+    digest = hashlib.sha256()
+    for index in scene_indices(root, split):
+        done = root / scene_dirname(index) / DONE
+        digest.update(f"{index}\n".encode())
+        digest.update(_read_bytes(done))
+    return digest.hexdigest()
+
+
 class SceneDataset(Dataset):
     """Whole scenes: ``rgb`` (3, H, W) float in [0, 1], ``depth`` (H, W) metres, ``labels_mushroom``
     / ``labels_cap`` (H, W) int64, ``K`` (3, 3), ``world_from_camera`` (4, 4), plus ``scene_id``,

@@ -37,7 +37,7 @@ from generator.dataset.writer import (
     scene_dirname,
     write_scene,
 )
-from generator.processes import die_with_parent
+from generator.processes import die_with_parent, init_ray
 
 MANIFEST = "manifest.json"
 FORMAT_VERSION = 1
@@ -283,8 +283,7 @@ def _run_ray(todo: list[int], args: tuple[Any, ...], workers: int, update: Calla
     except ImportError as exc:
         raise RuntimeError("backend 'ray' needs Ray: pip install 'sms3d-pick[ray]'") from exc
     if not ray.is_initialized():
-        ray.init(num_cpus=max(workers, 1), include_dashboard=False, log_to_driver=False,
-                 runtime_env={"env_vars": {"MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}})
+        init_ray(max(workers, 1), runtime_env={"env_vars": {"MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}})
     task = ray.remote(_run_one)
     refs = [task.remote(i, args) for i in todo]
     remaining = list(refs)

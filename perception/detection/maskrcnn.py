@@ -25,6 +25,7 @@ from torch import nn
 from perception.detection.detector import Detection
 from perception.detection.maskrcnn_config import DetectorConfig
 from perception.errors import CheckpointFormatError, CheckpointMismatchError
+from perception.run_files import atomic_torch_save, read_torch_file
 
 CHECKPOINT_FORMAT = "sms3d-maskrcnn-1"
 
@@ -147,28 +148,24 @@ class MaskRCNNDetector:
         """Load a checkpoint written by ``save_detector``; ``overrides`` change thresholds/sizes."""
         config, state = load_detector(path, **overrides)
         model = build_maskrcnn(config)
-        model.load_state_dict(state)
+        try:
+            model.load_state_dict(state)
+        except RuntimeError as exc:
+            raise CheckpointFormatError(f"{path}: weights do not fit a {config.arch} detector ({exc})") from exc
         return cls(model, config, device)
 
 
 def save_detector(path: str | Path, model: nn.Module, config: DetectorConfig, extra: dict[str, Any] | None = None) -> Path:
     """Write weights + config atomically (a crash leaves the previous file intact)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save({"format": CHECKPOINT_FORMAT, "config": asdict(config), "model": model.state_dict(), **(extra or {})}, tmp)
-    os.replace(tmp, path)
-    return path
+    atomic_torch_save({"format": CHECKPOINT_FORMAT, "config": asdict(config), "model": model.state_dict(),
+                       **(extra or {})}, path)
+    return Path(path)
 
 
 def read_detector_checkpoint(path: str | Path) -> dict[str, Any]:
-    """The raw checkpoint dict, or ``CheckpointFormatError`` if it is not one of ours."""
-    try:
-        data = torch.load(Path(path), map_location="cpu", weights_only=False)
-    except FileNotFoundError:
-        raise
-    except Exception as exc:
-        raise CheckpointFormatError(f"{path}: not a readable detector checkpoint ({exc})") from exc
+    """The raw checkpoint dict (tensors and plain values only), or ``CheckpointFormatError`` if
+    it is not one of ours."""
+    data = read_torch_file(path, "detector checkpoint")
     if not isinstance(data, dict) or data.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointFormatError(f"{path}: not a Mask R-CNN detector checkpoint (format "
                                     f"{data.get('format') if isinstance(data, dict) else type(data).__name__!r})")

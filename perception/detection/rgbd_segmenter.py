@@ -36,7 +36,7 @@ from torch import nn
 from perception.detection.detector import Detection
 from perception.detection.segmenter_config import SegmenterConfig
 from perception.errors import CheckpointFormatError, PerceptionConfigError, PipelineInputError
-from perception.run_files import atomic_torch_save
+from perception.run_files import atomic_torch_save, read_torch_file
 
 CHECKPOINT_FORMAT = "sms3d-rgbd-segmenter-1"
 #: Height above the median depth is fed in units of this many metres (mushrooms stand 2–10 cm).
@@ -185,13 +185,9 @@ def save_segmenter(path: str | Path, model: RGBDUNet, config: SegmenterConfig, e
 
 
 def read_segmenter_checkpoint(path: str | Path) -> dict[str, Any]:
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such segmenter checkpoint")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # torch raises many types for a file that is not a checkpoint
-        raise CheckpointFormatError(f"{path}: not a readable checkpoint ({exc})") from exc
+    """The raw checkpoint dict (tensors and plain values only), or ``CheckpointFormatError``
+    naming the file if it is not a segmenter's."""
+    state = read_torch_file(path, "segmenter checkpoint")
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointFormatError(f"{path}: not an RGB-D segmenter checkpoint (format {CHECKPOINT_FORMAT!r})")
     return state
@@ -208,7 +204,10 @@ def load_segmenter(path: str | Path, threads: int | None = None, **overrides: An
     if config.widths != tuple(stored["widths"]):
         raise PerceptionConfigError("widths", "the network's widths are fixed by the checkpoint")
     model = build_segmenter(config)
-    model.load_state_dict(state["model"])
+    try:
+        model.load_state_dict(state["model"])
+    except RuntimeError as exc:
+        raise CheckpointFormatError(f"{path}: weights do not fit widths {config.widths} ({exc})") from exc
     return RGBDSegmenter(model, config, threads)
 
 

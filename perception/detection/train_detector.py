@@ -3,7 +3,9 @@
 ``train_detector`` writes into ``out``: ``last.pt`` (weights, optimiser, epoch: what resuming
 reads), ``best.pt`` (the epoch with the best validation mask AP, or the last epoch without a
 validation split), and ``log.csv``. Each file is replaced atomically, so a run killed at any
-point resumes from its last finished epoch with ``resume=True``.
+point resumes from its last finished epoch. The folder records the run's settings
+(``generator.run_folder``): a rerun with the same ones resumes (more ``epochs`` extend it), other
+ones are refused unless ``overwrite``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from typing import Any
 import torch
 from torch.utils.data import DataLoader
 
+from generator.dataset.readers import dataset_checksum
+from generator.run_folder import open_run_folder
 from perception.detection.detector_data import CocoDetectionDataset, collate_detection
 from perception.detection.detector_eval import evaluate_detector
 from perception.detection.maskrcnn import (
@@ -28,16 +32,23 @@ from perception.detection.maskrcnn import (
 )
 from perception.detection.maskrcnn_config import DetectorTrainConfig
 from perception.errors import PerceptionConfigError
-from perception.run_files import learning_rate, write_log_csv
+from perception.run_files import learning_rate, say_resumed, write_log_csv
+
+#: Settings a rerun may change and still resume: more epochs extend a run.
+RESUMABLE_CHANGES = ("epochs",)
 
 
 def train_detector(root: str | Path, out: str | Path, config: DetectorConfig | None = None,
-                   train: DetectorTrainConfig | None = None, resume: bool = True,
+                   train: DetectorTrainConfig | None = None, overwrite: bool = False,
                    device: str = "cpu", progress: bool = True) -> list[dict[str, Any]]:
-    """Train on ``root``'s train split; returns the per-epoch log (loss, validation AP/F1, time)."""
+    """Train on ``root``'s train split; returns the per-epoch log (loss, validation AP/F1, time).
+
+    Raises:
+        PerceptionConfigError: the train split has no images.
+        generator.run_folder.RunFolderError: ``out`` holds a run with other settings (each named)
+            and not ``overwrite``.
+    """
     config, train = config or DetectorConfig(), train or DetectorTrainConfig()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(train.seed)
     dataset = CocoDetectionDataset(root, "train", config.category, augment=train.augment)
     if train.max_images is not None:
@@ -51,18 +62,18 @@ def train_detector(root: str | Path, out: str | Path, config: DetectorConfig | N
     model = build_maskrcnn(config, pretrained=train.pretrained).to(device)
     params = [p for p in model.parameters() if p.requires_grad]
     optimiser = torch.optim.AdamW(params, lr=train.lr, weight_decay=train.weight_decay)
+    settings = {**asdict(config), **asdict(train), "data": str(Path(root).resolve()), "scenes": dataset_checksum(root)}
+    run = open_run_folder(out, settings, overwrite=overwrite, may_change=RESUMABLE_CHANGES)
+    out = run.path
     start_epoch, log, best_ap = 0, [], -1.0
     last = out / "last.pt"
-    if resume and last.is_file():
+    if run.resumed and last.is_file():
         state = read_detector_checkpoint(last)
-        stored = DetectorConfig(**state["config"])
-        if stored.architecture() != config.architecture():
-            raise PerceptionConfigError("resume", f"{last} was trained with {stored.architecture()}, not {config.architecture()}; "
-                                                  "use another --out or resume=False")
         model.load_state_dict(state["model"])
         optimiser.load_state_dict(state["optimiser"])
         start_epoch, log, best_ap = state["epoch"], state["log"], state["best_ap"]
         torch.set_rng_state(state["rng"])
+        say_resumed(out, start_epoch, train.epochs)
 
     generator = torch.Generator().manual_seed(train.seed)
     loader = DataLoader(dataset, batch_size=train.batch_size, shuffle=True, collate_fn=collate_detection,

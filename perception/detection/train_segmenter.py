@@ -2,7 +2,9 @@
 
 ``train_segmenter`` writes into ``out``: ``last.pt`` (weights, optimiser, epoch, log: what
 resuming reads), ``best.pt`` (the epoch with the best validation mask F1) and ``log.csv``; each
-is replaced atomically, so a run killed at any point resumes from its last finished epoch.
+is replaced atomically, so a run killed at any point resumes from its last finished epoch. The
+folder records the run's settings (``generator.run_folder``): a rerun with the same ones resumes
+(more ``epochs`` or another time limit extend it), other ones are refused unless ``overwrite``.
 Losses: binary cross-entropy on the mushroom mask, CenterNet's penalty-reduced focal loss on
 the centre heat (Zhou et al., "Objects as Points", 2019), L1 on the offsets.
 """
@@ -19,6 +21,8 @@ import torch
 import torch.nn.functional as F
 from torch.utils.data import DataLoader
 
+from generator.dataset.readers import dataset_checksum
+from generator.run_folder import open_run_folder
 from perception.detection.rgbd_segmenter import (
     RGBDSegmenter,
     build_segmenter,
@@ -28,7 +32,10 @@ from perception.detection.rgbd_segmenter import (
 from perception.detection.segmenter_config import SegmenterConfig, SegmenterTrainConfig
 from perception.detection.segmenter_data import SegmenterDataset, scene_folders
 from perception.errors import PerceptionConfigError
-from perception.run_files import learning_rate, write_log_csv
+from perception.run_files import learning_rate, say_resumed, write_log_csv
+
+#: Settings a rerun may change and still resume: they extend or cut short a run, not redo it.
+RESUMABLE_CHANGES = ("epochs", "time_limit_min")
 
 
 def focal_centre_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -64,27 +71,36 @@ def validate(segmenter: RGBDSegmenter, roots: list[str | Path], max_images: int)
 
 
 def train_segmenter(roots: list[str | Path], out: str | Path, config: SegmenterConfig | None = None,
-                    train: SegmenterTrainConfig | None = None, resume: bool = True,
+                    train: SegmenterTrainConfig | None = None, overwrite: bool = False,
                     progress: bool = True) -> list[dict[str, Any]]:
-    """Train on the ``train`` splits of ``roots``; returns the per-epoch log."""
+    """Train on the ``train`` splits of ``roots``; returns the per-epoch log.
+
+    Raises:
+        PerceptionConfigError: no training scenes, or fewer than ``batch_size`` of them.
+        generator.run_folder.RunFolderError: ``out`` holds a run with other settings (each named)
+            and not ``overwrite``.
+    """
     config, train = config or SegmenterConfig(), train or SegmenterTrainConfig()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(train.seed)
     dataset = SegmenterDataset(scene_folders(roots, "train"), crop=train.crop, sigma=config.centre_sigma_px)
+    if len(dataset) < train.batch_size:  # every batch is full (drop_last): there would be none
+        raise PerceptionConfigError("batch_size", f"{train.batch_size} is more than the {len(dataset)} training images "
+                                                  f"of {', '.join(map(str, roots))}; lower --batch-size")
     model = build_segmenter(config)
     optimiser = torch.optim.AdamW(model.parameters(), lr=train.lr, weight_decay=train.weight_decay)
+    settings = {**asdict(train), **config.to_dict(), "data": [str(Path(r).resolve()) for r in roots],
+                "scenes": [dataset_checksum(r) for r in roots]}
+    run = open_run_folder(out, settings, overwrite=overwrite, may_change=RESUMABLE_CHANGES)
+    out = run.path
     start_epoch, log, best = 0, [], -1.0
     last = out / "last.pt"
-    if resume and last.is_file():
+    if run.resumed and last.is_file():
         state = read_segmenter_checkpoint(last)
-        if tuple(state["config"]["widths"]) != config.widths:
-            raise PerceptionConfigError("resume", f"{last} has widths {state['config']['widths']}, not {config.widths}; "
-                                                  "use another --out or resume=False")
         model.load_state_dict(state["model"])
         optimiser.load_state_dict(state["optimiser"])
         start_epoch, log, best = state["epoch"], state["log"], state["best_f1"]
         torch.set_rng_state(state["rng"])
+        say_resumed(out, start_epoch, train.epochs)
     generator = torch.Generator().manual_seed(train.seed)
     loader = DataLoader(dataset, batch_size=train.batch_size, shuffle=True, generator=generator, drop_last=True)
     total_iters = train.epochs * len(loader)

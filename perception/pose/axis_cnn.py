@@ -29,7 +29,7 @@ from torch import nn
 
 from perception.errors import CheckpointFormatError, NoEstimate, PerceptionConfigError
 from perception.pose.depth_crops import CROP_CHANNELS, CROP_SIZE, crop_around_mask
-from perception.run_files import atomic_torch_save
+from perception.run_files import atomic_torch_save, read_torch_file
 
 #: The shipped weights (``sms3d train-axis-cnn``; recipe and metrics in the README beside them).
 SHIPPED_AXIS_CNN = Path(__file__).resolve().parents[1] / "weights" / "axis_cnn" / "axis_cnn.pt"
@@ -149,13 +149,7 @@ def load_axis_cnn(path: str | Path) -> tuple[AxisCNN, dict[str, Any]]:
         FileNotFoundError: no such file.
         CheckpointFormatError: not an axis-CNN checkpoint, or weights that do not fit its config.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"axis CNN checkpoint not found: {path}")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises several unrelated types for a bad file
-        raise CheckpointFormatError(f"{path}: not a readable checkpoint ({exc})") from exc
+    payload = read_torch_file(path, "axis-CNN checkpoint")
     if not isinstance(payload, dict) or payload.get("format") != FORMAT or "state_dict" not in payload:
         raise CheckpointFormatError(f"{path}: not an axis-CNN checkpoint (format {FORMAT})")
     model = AxisCNN(AxisCNNConfig(**payload["config"]))

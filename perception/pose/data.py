@@ -27,6 +27,7 @@ from torch.utils.data import Dataset
 from perception.errors import PerceptionConfigError
 from perception.pointcloud import MIN_POINTS, SamplingMethod, prepare_cloud, to_tensor
 from perception.pose.augment import AugmentConfig, augment_points, occlude_points
+from perception.run_files import checksum
 
 FORMAT_VERSION = 1
 
@@ -134,6 +135,12 @@ class PointCloudPoseDataset(Dataset):
 
     def set_epoch(self, epoch: int) -> None:
         self.epoch = int(epoch)
+
+    def checksum(self) -> str:
+        """What a training run records of its data (``run_files.checksum``): every sample's
+        points, colours (when fed) and rotation, and the seed and sampling that draw from them."""
+        fed = [a for s in self.samples for a in (s.points, s.rotation, *([s.colors] if self.use_rgb else []))]
+        return checksum(*map(np.asarray, fed), np.array([self.seed]), np.array(self.sampling))
 
     def __len__(self) -> int:
         return len(self.samples)

@@ -21,7 +21,7 @@ from perception.errors import CheckpointFormatError, CheckpointMismatchError
 from perception.pose import rotations as rot
 from perception.pose.backbones import build_backbone
 from perception.pose.config import PoseNetConfig
-from perception.run_files import atomic_torch_save
+from perception.run_files import atomic_torch_save, read_torch_file
 
 CHECKPOINT_FORMAT = "sms3d-posenet"
 CHECKPOINT_VERSION = 1
@@ -75,13 +75,7 @@ def save_checkpoint(path: str | Path, model: PoseNet, extra: dict[str, Any] | No
 
 def read_checkpoint(path: str | Path) -> dict[str, Any]:
     """Read and check a checkpoint file's envelope (no model is built)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such checkpoint")
-    try:
-        payload = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - any unpickling failure is a format error
-        raise CheckpointFormatError(f"{path}: not a readable checkpoint ({exc})") from exc
+    payload = read_torch_file(path, "pose-network checkpoint")
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointFormatError(f"{path}: not a {CHECKPOINT_FORMAT} checkpoint")
     if payload.get("version") != CHECKPOINT_VERSION:

@@ -2,15 +2,14 @@
 
 Adam (lr 1e-4 by default, as in the SMS3D paper) with ReduceLROnPlateau on the validation
 loss, batch 32, label-preserving augmentation, validation every epoch, an atomic checkpoint
-every epoch (``last.pt``, with optimiser/scheduler/RNG state for resuming) and of the best
-validation loss (``best.pt``), a CSV log and a tqdm bar. Metrics are mean/median geodesic error
-and stem-axis error in degrees.
+every epoch (``last.pt``, and ``train_state.pt`` with the weights and optimiser/scheduler/RNG
+state for resuming) and of the best validation loss (``best.pt``), a CSV log and a tqdm bar.
+Metrics are mean/median geodesic error and stem-axis error in degrees.
 """
 
 from __future__ import annotations
 
 import csv
-import json
 import random
 import time
 from collections.abc import Callable
@@ -21,7 +20,9 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
+from generator.run_folder import open_run_folder
 from perception.pose.config import TrainConfig
+from perception.pose.data import PointCloudPoseDataset
 from perception.pose.metrics import PoseMetrics, errors_deg, summarize
 from perception.pose.pose_net import (
     PoseNet,
@@ -32,7 +33,11 @@ from perception.pose.pose_net import (
     save_checkpoint,
 )
 from perception.pose.rotations import rotation_loss
-from perception.run_files import atomic_torch_save
+from perception.run_files import atomic_torch_save, read_torch_file, say_resumed
+
+#: Settings a rerun may change and still resume: they extend or cut short a run, or say where
+#: and how visibly it runs, not what it computes.
+RESUMABLE_CHANGES = ("epochs", "time_limit_s", "device", "num_workers", "progress")
 
 CSV_FIELDS = (
     "epoch", "lr", "train_loss", "val_loss", "val_mean_geodesic_deg", "val_median_geodesic_deg",
@@ -75,19 +80,21 @@ def evaluate(
 def train(
     net_config: PoseNetConfig,
     cfg: TrainConfig,
-    train_set: Dataset,
-    val_set: Dataset,
+    train_set: PointCloudPoseDataset,
+    val_set: PointCloudPoseDataset,
     out_dir: str | Path,
-    resume: bool = False,
+    overwrite: bool = False,
     on_epoch: Callable[[dict[str, float]], None] | None = None,
     init: str | Path | None = None,
     init_backbone: str | Path | None = None,
 ) -> tuple[PoseNet, list[dict[str, float]]]:
     """Train and return ``(best model in eval mode, per-epoch log rows)``.
 
-    With ``resume=True`` and ``out_dir/last.pt`` present, training continues from it (the
-    network config must match). Writes ``last.pt``, ``best.pt``, ``log.csv`` and
-    ``train_config.json`` in ``out_dir``.
+    ``out_dir`` records the run's settings (``run_settings.json``: both configs, ``init``,
+    ``init_backbone`` and the data's checksums). Rerun with the same settings (``RESUMABLE_CHANGES``
+    aside), training continues from ``train_state.pt``; other settings raise
+    :class:`~generator.run_folder.RunFolderError` naming them, unless ``overwrite``, which starts
+    anew. Writes ``last.pt``, ``best.pt``, ``train_state.pt`` and ``log.csv`` in ``out_dir``.
 
     With ``init``, training starts from the weights of that checkpoint (fine-tuning; its network
     must have ``net_config``'s shape, else :class:`CheckpointMismatchError`, while its input
@@ -95,8 +102,6 @@ def train(
     ignores it. With ``init_backbone``, only that checkpoint's backbone and hidden head layer are
     loaded (:func:`~perception.pose.pose_net.load_backbone`): the way to change the rotation head.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     seed_everything(cfg.seed)
     device = torch.device(cfg.device)
     model = PoseNet(net_config).to(device)
@@ -108,25 +113,22 @@ def train(
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(
         opt, mode="min", factor=cfg.plateau_factor, patience=cfg.plateau_patience, min_lr=cfg.min_lr
     )
+    settings = {**net_config.to_dict(), **cfg.to_dict(), "init": None if init is None else str(init),
+                "init_backbone": None if init_backbone is None else str(init_backbone),
+                "train_data": train_set.checksum(), "val_data": val_set.checksum()}
+    run = open_run_folder(out_dir, settings, overwrite=overwrite, may_change=RESUMABLE_CHANGES)
+    out = run.path
     start_epoch, best, rows = 0, float("inf"), []
-    last_path, best_path, log_path = out / "last.pt", out / "best.pt", out / "log.csv"
-    if resume and last_path.exists():
-        model, _ = load_checkpoint(last_path, net_config, map_location=device)
-        state = torch.load(out / "train_state.pt", map_location="cpu", weights_only=False)
-        opt = torch.optim.Adam(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    best_path, log_path, state_path = out / "best.pt", out / "log.csv", out / "train_state.pt"
+    if run.resumed and state_path.is_file():
+        state = read_torch_file(state_path, "pose training state")
+        model.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
-        sched.optimizer = opt
         sched.load_state_dict(state["scheduler"])
         start_epoch, best, rows = state["epoch"] + 1, state["best"], state["rows"]
         torch.set_rng_state(state["torch_rng"])
         random.setstate(state["python_rng"])
-    (out / "train_config.json").write_text(
-        json.dumps(
-            {"net": net_config.to_dict(), "train": cfg.to_dict(), "init": None if init is None else str(init),
-             "init_backbone": None if init_backbone is None else str(init_backbone)},
-            indent=2, default=str,
-        )
-    )
+        say_resumed(out, start_epoch, cfg.epochs)
     loader = _loader(train_set, cfg.batch_size, True, cfg.seed, cfg.num_workers)
     t_start = time.perf_counter()
     for epoch in range(start_epoch, cfg.epochs):
@@ -160,14 +162,16 @@ def train(
         if score < best:
             best = score
             save_checkpoint(best_path, model, {"epoch": epoch + 1, "val": m.as_dict(), "val_loss": val_loss})
-        save_checkpoint(last_path, model, {"epoch": epoch + 1, "val": m.as_dict(), "val_loss": val_loss})
+        save_checkpoint(out / "last.pt", model, {"epoch": epoch + 1, "val": m.as_dict(), "val_loss": val_loss})
+        # What resuming reads, the weights included: one file, so that a kill between two writes
+        # cannot pair one epoch's weights with another's optimiser.
         atomic_torch_save(
             {
-                "optimizer": opt.state_dict(), "scheduler": sched.state_dict(), "epoch": epoch,
-                "best": best, "rows": rows, "torch_rng": torch.get_rng_state(),
+                "model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
+                "epoch": epoch, "best": best, "rows": rows, "torch_rng": torch.get_rng_state(),
                 "python_rng": random.getstate(),
             },  # fmt: skip
-            out / "train_state.pt",
+            state_path,
         )
         _write_csv(log_path, rows)
         if cfg.progress:

@@ -4,15 +4,19 @@
 the detector, matches its masks to the ground truth (``data.matched_detections``) and crops
 each matched mushroom (``depth_crops``), labelled with its true stem axis in the crop's ray
 frame. The crops of a dataset split are cached in one ``.npz`` (``generator.files.save_npz_atomic``:
-written atomically; remade when the detector's weights or the crop layout change).
+written atomically; remade when the split's scenes (by the checksums the generator recorded),
+the detector's weights or the crop layout change).
 
 ``train_axis_cnn`` fits the network on the training splits' crops with a loss between predicted
 and true axes (``axis_loss``), one random quarter turn and mirror (``dihedral``) per batch,
 AdamW, a linear warm-up and cosine decay over the whole run; after every epoch it scores the
 validation splits (mean axis error, 8 dihedral views) and writes ``last.pt`` (resumable:
 weights, optimiser, epoch), ``best.pt`` (the network with the lowest validation error, in the
-shipped format) and ``log.csv``, all atomically. Batches are drawn from a generator seeded by
-``seed`` and the epoch, so a resumed run draws what the uninterrupted one would have.
+shipped format) and ``log.csv``, all atomically. The output folder records the run's settings
+(``generator.run_folder``): a rerun with the same ones resumes from ``last.pt`` (more ``epochs``
+or another time limit extend it), other ones are refused unless ``overwrite``. Batches are drawn
+from a generator seeded by ``seed`` and the epoch, so a resumed run draws what the uninterrupted
+one would have.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import numpy as np
 import torch
 
 from generator.files import read_npz_made_with, save_npz_atomic
+from generator.run_folder import open_run_folder
 from perception.choices import AXIS_LOSSES
 from perception.errors import NoEstimate, PerceptionConfigError
 from perception.pose.axis_cnn import (
@@ -45,10 +50,19 @@ from perception.pose.depth_crops import (
     crop_around_mask,
 )
 from perception.pose.widen import widen_axis_cnn
-from perception.run_files import atomic_torch_save, learning_rate, write_log_csv
+from perception.run_files import (
+    atomic_torch_save,
+    checksum,
+    learning_rate,
+    read_torch_file,
+    say_resumed,
+    write_log_csv,
+)
 
 #: Meta columns of a crop set.
 META_COLUMNS = ("scene_id", "instance_id", "mask_iou", "visible_fraction", "tilt_deg", "cap_diameter_mm")
+#: Settings a rerun may change and still resume: they extend or cut short a run, not redo it.
+RESUMABLE_CHANGES = ("epochs", "time_limit_min")
 
 
 @dataclass(frozen=True)
@@ -94,6 +108,10 @@ class CropSet:
     def __len__(self) -> int:
         return len(self.axes)
 
+    def checksum(self) -> str:
+        """What a run records of its crops (see ``run_files.checksum``)."""
+        return checksum(self.crops, self.axes, self.meta)
+
     @classmethod
     def concatenate(cls, sets: list[CropSet]) -> CropSet:
         return cls(*(np.concatenate([getattr(s, f.name) for s in sets]) for f in dataclasses.fields(cls)))
@@ -138,8 +156,13 @@ def crops_from_detections(root: str | Path, split: str | None, detector: Any, pr
 def cached_crops(root: str | Path, split: str, detector: Any, detector_id: str, cache: str | Path | None,
                  progress: bool = False) -> CropSet:
     """:func:`crops_from_detections`, read from ``cache`` when it holds the crops of the same
-    dataset, split and detector (``detector_id``: e.g. its weights' hash), else made and saved."""
-    made_with = {"root": str(Path(root).resolve()), "split": split, "detector": detector_id,
+    scenes, split and detector (``detector_id``: e.g. its weights' hash), else made and saved.
+
+    The scenes are known by their content (``dataset_checksum``), not their folder: a dataset
+    regenerated at the same path gets new crops."""
+    from generator.dataset.readers import dataset_checksum
+
+    made_with = {"scenes": dataset_checksum(root, split), "split": split, "detector": detector_id,
                  "crop": [CROP_SIZE, CROP_CHANNELS, CROP_MARGIN, CROP_PAD_PX]}
     path = None if cache is None else Path(cache) / f"axis_crops_{Path(root).name}_{split}.npz"
     if path is not None:
@@ -178,18 +201,24 @@ def axis_errors_deg(model: AxisCNN, crop_set: CropSet) -> np.ndarray:
 
 
 def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTrainConfig | None = None,
-                   net: AxisCNNConfig | None = None, resume: bool = False, progress: bool = True,
+                   net: AxisCNNConfig | None = None, overwrite: bool = False, progress: bool = True,
                    extra: dict[str, Any] | None = None, init: str | Path | None = None) -> dict[str, Any]:
     """Fit an axis CNN (see the module doc); returns the best epoch's metrics. ``init`` starts
     from a saved network's weights instead of the upright prior; a ``net`` wider than it widens
-    it first, keeping its function (``widen.widen_axis_cnn``)."""
+    it first, keeping its function (``widen.widen_axis_cnn``). ``extra`` (JSON values, e.g. the
+    command's dataset folders) is recorded with the settings and in ``best.pt``.
+
+    Raises:
+        PerceptionConfigError: too few crops for a batch, or no validation crops.
+        FileNotFoundError, CheckpointFormatError: ``init`` or ``out``'s ``last.pt`` unreadable.
+        generator.run_folder.RunFolderError: ``out`` holds a run with other settings (each named)
+            and not ``overwrite``.
+    """
     config = config or AxisTrainConfig()
     if len(train) < config.batch_size:
         raise PerceptionConfigError("batch_size", f"{config.batch_size} is more than the {len(train)} training crops")
     if len(val) == 0:
         raise PerceptionConfigError("val", "no validation crops")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     if init is None:
         model = AxisCNN(net or AxisCNNConfig())
@@ -197,16 +226,22 @@ def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTr
         model = load_axis_cnn(init)[0]
         if net is not None and (net.width, net.hidden) != (model.config.width, model.config.hidden):
             model = widen_axis_cnn(model, net.width, net.hidden, seed=config.seed)
+    recorded = {"init": None if init is None else str(init), **(extra or {})}
+    settings = {**dataclasses.asdict(config), **dataclasses.asdict(model.config), **recorded,
+                "train_crops": train.checksum(), "val_crops": val.checksum()}
+    run = open_run_folder(out, settings, overwrite=overwrite, may_change=RESUMABLE_CHANGES)
+    out = run.path
     model.train()
     optimiser = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     rows: list[dict[str, Any]] = []
     start_epoch, best = 0, {"val_mean_axis_deg": float("inf")}
     state_path = out / "last.pt"
-    if resume and state_path.is_file():
-        state = torch.load(state_path, map_location="cpu", weights_only=True)
+    if run.resumed and state_path.is_file():
+        state = read_torch_file(state_path, "axis-CNN training state")
         model.load_state_dict(state["model"])
         optimiser.load_state_dict(state["optimiser"])
         start_epoch, rows, best = state["epoch"], state["rows"], state["best"]
+        say_resumed(out, start_epoch, config.epochs)
     crops, axes = torch.from_numpy(train.crops), torch.from_numpy(train.axes)
     steps = len(train) // config.batch_size
     total = config.epochs * steps
@@ -240,7 +275,7 @@ def train_axis_cnn(train: CropSet, val: CropSet, out: str | Path, config: AxisTr
         rows.append(row)
         if row["val_mean_axis_deg"] < best["val_mean_axis_deg"]:
             best = row
-            save_axis_cnn(out / "best.pt", model, {"metrics": row, "train": dataclasses.asdict(config), **(extra or {})})
+            save_axis_cnn(out / "best.pt", model, {"metrics": row, "train": dataclasses.asdict(config), **recorded})
         atomic_torch_save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch + 1,
                            "rows": rows, "best": best}, state_path)
         write_log_csv(out / "log.csv", rows)

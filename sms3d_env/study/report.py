@@ -183,6 +183,34 @@ def save_figure(fig: Any, path: str | Path) -> None:
     write_atomic(Path(path), buffer.getvalue())
 
 
+def check_figure_path(out: str | Path, flag: str = "--out") -> None:
+    """``ValueError`` naming ``flag`` unless ``out`` can be a figure's path: not empty, no folder,
+    in a folder that exists (checked before the work, which would otherwise be lost at the end)."""
+    path = Path(out)
+    if not str(out).strip():
+        raise ValueError(f"{flag} must name a PNG file, got an empty path")
+    if path.is_dir():
+        raise ValueError(f"{flag} {out}: is a folder; name the PNG file to write")
+    if not path.absolute().parent.is_dir():
+        raise ValueError(f"{flag} {out}: the folder {path.absolute().parent} does not exist")
+
+
+def distinct_names(paths: Sequence[str | Path]) -> list[str]:
+    """A label per folder: the shortest suffix of its path that no other folder's path ends with
+    (``a/seed0`` and ``b/seed0`` for two runs named ``seed0``); ``ValueError`` naming a folder
+    given twice."""
+    parts = [Path(p).resolve().parts for p in paths]
+    for i, mine in enumerate(parts):
+        if mine in parts[:i]:
+            raise ValueError(f"{paths[i]} is given twice")
+    names = []
+    for mine in parts:
+        depth = next(k for k in range(1, len(mine) + 1)
+                     if all(other[-k:] != mine[-k:] for other in parts if other != mine))
+        names.append(str(Path(*mine[-depth:])))
+    return names
+
+
 def plot_curves(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path, title: str,
                 xlabel: str = "orientation error θ (degrees, rotation perpendicular to the stem)") -> None:
     """Success vs orientation error with 95 % Wilson intervals, one line per label; each value
@@ -209,11 +237,9 @@ def plot_curves(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path, t
 
 
 def plot_pickers(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path) -> None:
-    """One line per picker (default physics, noisy source, no position error): the sweeps of
-    several pickers on the same seeded episodes."""
-    tables = {label: [t for t in success_table(rows) if t["variant"] == "default" and t["position_error_mm"] == 0.0]
-              for label, rows in curves.items()}
-    plot_curves({k: v for k, v in tables.items() if v}, path,
+    """One line per picker: the sweeps of several pickers on the same seeded episodes, each the
+    rows of one physics variant and position error (``sweep.compared_rows``)."""
+    plot_curves({label: success_table(rows) for label, rows in curves.items()}, path,
                 "Pickers on the same seeded episodes: success vs orientation error")
 
 

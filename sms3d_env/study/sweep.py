@@ -24,6 +24,7 @@ import numpy as np
 from generator.dataset.errors import CorruptFileError
 from generator.errors import ConfigError
 from generator.files import write_atomic
+from generator.run_folder import check_out_path
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.study.report import write_report
 
@@ -217,22 +218,28 @@ def _pose_weights_digest(config: SweepConfig) -> str:
     return digest.hexdigest()[:16]
 
 
-def _picker_digest(config: SweepConfig) -> str | None:
-    """SHA-256 (16 hex digits) of a learned picker's model, None for the scripted picker."""
+def _picker_digests(config: SweepConfig) -> dict[str, str] | None:
+    """SHA-256 (16 hex digits) of each file a learned picker loads, by path: its model, and its
+    run's ``config.json`` (the env options it acts in) and observation statistics where it has
+    them; None for the scripted picker."""
     import hashlib
 
     from sms3d_env.pickers.registry import parse_picker
+    from sms3d_env.training.actor import observation_stats_path, saved_config_path
 
-    path = parse_picker(config.picker).model_path
-    return None if path is None else hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    model = parse_picker(config.picker).model_path
+    if model is None:
+        return None
+    files = [f for f in (model, saved_config_path(model), observation_stats_path(model)) if f is not None]
+    return {str(f): hashlib.sha256(f.read_bytes()).hexdigest()[:16] for f in files}
 
 
 def _settings(config: SweepConfig) -> dict[str, Any]:
     """What ``sweep_config.json`` records: the config, the pose weights behind perception parts
-    and the learned picker's model."""
+    and the learned picker's files."""
     digest = _pose_weights_digest(config) if config.perception_episodes else None
     return json.loads(json.dumps({**dataclasses.asdict(config), "pose_weights_sha256": digest,
-                                  "picker_sha256": _picker_digest(config)}, default=str))
+                                  "picker_sha256": _picker_digests(config)}, default=str))
 
 
 def _read_json(path: Path, remedy: str) -> Any:
@@ -241,6 +248,16 @@ def _read_json(path: Path, remedy: str) -> Any:
         return json.loads(path.read_text(encoding="utf-8"))
     except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError
         raise CorruptFileError(path, f"not readable JSON ({exc}); {remedy}") from exc
+
+
+def _difference(key: str, recorded: Any, requested: Any) -> str:
+    """A resume setting that differs, as the refusal names it: the learned picker's files by path."""
+    if key != "picker_sha256":
+        return f"{key}: folder has {recorded!r}, requested {requested!r}"
+    # Records from before the config.json was hashed hold the model's digest alone (a string).
+    old, new = (d if isinstance(d, dict) else {} for d in (recorded, requested))
+    changed = sorted(f for f in old.keys() | new.keys() if old.get(f) != new.get(f))
+    return f"picker files changed since the parts were made: {', '.join(changed)}"
 
 
 def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
@@ -267,7 +284,7 @@ def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
     differ = {k: (stored.get(k, _RESUME_DEFAULTS.get(k)), requested[k]) for k in keys
               if stored.get(k, _RESUME_DEFAULTS.get(k)) != requested[k]}
     if differ:
-        details = ", ".join(f"{k}: folder has {a!r}, requested {b!r}" for k, (a, b) in differ.items())
+        details = ", ".join(_difference(k, a, b) for k, (a, b) in differ.items())
         raise ValueError(f"{path.parent} holds a sweep with other settings ({details}); use another --out")
 
 
@@ -282,7 +299,7 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
 
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    out = Path(out)
+    out = check_out_path(out)
     parts = out / "parts"
     settings = _settings(config)
     _check_resumable(out / "sweep_config.json", settings)
@@ -312,14 +329,17 @@ def run_sweep(config: SweepConfig, out: str | Path, workers: int = 1, progress: 
 
 
 def _run_ray(todo: list[Task], config: SweepConfig, parts: Path, workers: int, update: Any) -> None:
-    """The tasks as Ray tasks (a local cluster of ``workers`` CPUs unless one is running), each
-    writing its part file as in the process pool."""
+    """The tasks as Ray tasks (a local cluster of ``workers`` CPUs that ends with this process,
+    unless one is running), each writing its part file as in the process pool."""
     try:
         import ray
     except ImportError as exc:
         raise RuntimeError("backend 'ray' needs Ray: pip install 'sms3d-pick[ray]'") from exc
     if not ray.is_initialized():
-        ray.init(num_cpus=max(workers, 1), include_dashboard=False, log_to_driver=False)
+        from generator.processes import init_ray
+
+        # Its processes end with this one: an orphan would keep writing parts beside a resumed sweep.
+        init_ray(max(workers, 1))
     remote = ray.remote(_run_and_save)
     pending = [remote.remote(task, config, parts) for task in todo]
     while pending:
@@ -370,16 +390,23 @@ def load_rows(folder: str | Path) -> list[dict[str, Any]]:
 def _cmd_compare(args: Any) -> int:
     import sys
 
-    from sms3d_env.study.report import plot_pickers
+    from sms3d_env.study.report import check_figure_path, distinct_names, plot_pickers
 
     try:
-        curves = {}
-        for folder in args.sweeps:
-            rows = load_rows(folder)
+        check_figure_path(args.out)
+        curves: dict[str, list[dict[str, Any]]] = {}
+        sweeps = {}
+        for folder, name in zip(args.sweeps, distinct_names(args.sweeps), strict=True):
+            rows = compared_rows(load_rows(folder))
+            if not rows:
+                raise ValueError(f"{folder} holds no episodes of the noisy pose source with the default "
+                                 "physics, the ones compared; rerun it with --variants default")
             label = rows[0].get("picker", "scripted")
             # Two sweeps of one picker (e.g. with other env options) keep both curves.
-            curves[label if label not in curves else f"{label} ({Path(folder).name})"] = rows
-    except (FileNotFoundError, CorruptFileError) as exc:
+            label = label if label not in curves else f"{label} ({name})"
+            curves[label], sweeps[folder] = rows, rows
+        check_paired(sweeps)
+    except (FileNotFoundError, CorruptFileError, ValueError) as exc:
         print(f"sms3d sweep-compare: error: {exc}", file=sys.stderr)
         return 2
     print(picker_comparison(curves))
@@ -388,19 +415,73 @@ def _cmd_compare(args: Any) -> int:
     return 0
 
 
+def compared_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The episodes ``sweep-compare`` sets side by side: the noisy pose source with the default
+    physics, in the sweep's base slice (its first tool and bed size, smallest position error)."""
+    from sms3d_env.study.report import axes, base_slice
+
+    default = [r for r in rows if r.get("source", "noisy") == "noisy" and r["variant"] == "default"]
+    if not default:
+        return []
+    base = base_slice(default)
+    return [r for r in default if axes(r) == base]
+
+
+def _spans(values: list[int]) -> str:
+    """Sorted integers as runs: ``0–39`` or ``0, 2, 5–9``."""
+    runs: list[list[int]] = []
+    for v in values:
+        if runs and v == runs[-1][1] + 1:
+            runs[-1][1] = v
+        else:
+            runs.append([v, v])
+    return ", ".join(f"{a}" if a == b else f"{a}–{b}" for a, b in runs)
+
+
+def _design(rows: list[dict[str, Any]]) -> dict[str, str]:
+    """What must be the same in two sweeps' ``compared_rows`` for their episodes to pair."""
+    from sms3d_env.study.report import axes
+
+    tool, size, position = axes(rows[0])
+    return {"tool": tool, "bed size": f"{size} mushrooms", "position error": f"{position:g} mm",
+            "errors": ", ".join(f"{e:g}°" for e in sorted({r["error_deg"] for r in rows})),
+            "seeds": _spans(sorted({int(r["seed"]) for r in rows})),
+            "episodes": f"{len(rows)} (error, seed) pairs"}
+
+
+def check_paired(sweeps: dict[str, list[dict[str, Any]]]) -> None:
+    """ValueError naming the sweeps and the settings they differ in, unless every sweep's
+    ``compared_rows`` ran the same seeded episodes as the first's: a comparison of other beds or
+    seeds would pair nothing (McNemar p = nan) or unlike episodes."""
+    (first, first_rows), *others = sweeps.items()
+    episodes = {(r["error_deg"], r["seed"]) for r in first_rows}
+    design = _design(first_rows)
+    problems = []
+    for folder, rows in others:
+        theirs = _design(rows)
+        differ = [k for k in design if design[k] != theirs[k]]
+        if not differ and {(r["error_deg"], r["seed"]) for r in rows} != episodes:
+            differ = ["episodes"]  # as many, but others (an unfinished sweep's)
+        if not differ:
+            continue
+        problems.append(f"{folder}: " + ", ".join(f"{k} {theirs[k]} ({first}: {design[k]})" for k in differ))
+    if problems:
+        raise ValueError("the sweeps did not run the same seeded episodes, so they cannot be paired: "
+                         + "; ".join(problems) + " (compare sweeps run with the same --num-mushrooms, --seed, "
+                         "--episodes, --errors and --position-errors-mm)")
+
+
 def picker_comparison(curves: dict[str, list[dict[str, Any]]]) -> str:
-    """Markdown: each picker's success per orientation error (no position error, default
-    physics, reachable targets) and the exact McNemar p against the first picker on the episodes
-    both ran (paired by seed)."""
-    from sms3d_env.study.report import axes, base_slice, mcnemar_p, wilson_interval
+    """Markdown: each picker's success per orientation error on its ``compared_rows`` (reachable
+    targets) and the exact McNemar p against the first picker on the episodes both ran (paired
+    by seed)."""
+    from sms3d_env.study.report import mcnemar_p, wilson_interval
 
     def outcomes(rows: list[dict[str, Any]]) -> dict[float, dict[int, bool]]:
-        """Per error, seed -> success in the sweep's base slice (first tool and bed size)."""
-        tool, size, position = base_slice(rows)
+        """Per error, seed -> success of the reachable targets."""
         by_error: dict[float, dict[int, bool]] = {}
         for r in rows:
-            if r["reachable"] and r.get("source", "noisy") == "noisy" and r["variant"] == "default" \
-                    and axes(r) == (tool, size, position):
+            if r["reachable"]:
                 by_error.setdefault(r["error_deg"], {})[r["seed"]] = bool(r["success"])
         return by_error
 
@@ -465,6 +546,7 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=_cmd_sweep)
 
     c = subparsers.add_parser("sweep-compare", help="one figure of several sweeps' pickers (success vs error)")
-    c.add_argument("sweeps", nargs="+", help="sweep folders (each run with its own --picker)")
+    c.add_argument("sweeps", nargs="+", help="sweep folders (each run with its own --picker, on the same "
+                                             "--num-mushrooms, --seed, --episodes and --errors)")
     c.add_argument("--out", required=True, help="PNG to write")
     c.set_defaults(func=_cmd_compare)

@@ -1,6 +1,12 @@
 """A saved pick policy as a picker: ``load_model`` and ``PolicyActor`` (observation statistics and
 the env it was trained on from the files beside it); ``SHIPPED_POLICY`` is the shipped one, and
-``SHIPPED_TRIGGER`` the shipped descend trigger (a residual picker)."""
+``SHIPPED_TRIGGER`` the shipped descend trigger (a residual picker).
+
+Trust: an SB3 model zip holds cloudpickled objects (its spaces, schedules, policy class), so
+loading an SB3 model from elsewhere runs code from it; load only files you trust. The observation
+statistics beside a model (``obs_rms.npz``) are plain arrays and are read without unpickling;
+an SB3 ``vecnormalize.pkl`` is never loaded.
+"""
 
 from __future__ import annotations
 
@@ -11,13 +17,15 @@ from typing import Any
 import numpy as np
 
 from sms3d_env.training.config import ALGOS
+from sms3d_env.training.model_files import OBS_STATS_FILE, ObservationStats, PolicyFileError
 
 #: The shipped pick policy (``model.zip`` with its ``config.json``, ``README.md``, metrics).
 SHIPPED_POLICY = Path(__file__).parents[1] / "weights" / "pick_policy" / "model.zip"
 #: The shipped descend trigger: a trigger-only residual learned from counterfactual rollouts
 #: (:mod:`sms3d_env.training.trigger_rollouts`), with its ``config.json``, ``README.md``, metrics.
 SHIPPED_TRIGGER = Path(__file__).parents[1] / "weights" / "descend_trigger" / "model.zip"
-VECNORM_FILE = "vecnormalize.pkl"
+#: What SB3's ``VecNormalize.save`` wrote beside models before ``obs_rms.npz``: a pickle, refused.
+PICKLED_STATS_FILE = "vecnormalize.pkl"
 
 
 def _checkpoint_parts(path: Path) -> tuple[str, str] | None:
@@ -42,17 +50,49 @@ def saved_config_path(model_path: str | Path) -> Path | None:
     return None
 
 
+#: A checkpoint's files by part: (name infix, extension), named as SB3's ``CheckpointCallback``
+#: names them (``ppo_obs_rms_1400000_steps.npz`` beside ``ppo_1400000_steps.zip``).
+CHECKPOINT_PARTS = {"model": ("", "zip"), "obs_rms": ("obs_rms_", "npz"), "replay_buffer": ("replay_buffer_", "pkl")}
+
+
+def checkpoint_path(folder: str | Path, algo: str, steps: int, part: str = "model") -> Path:
+    """The file of ``part`` (a key of :data:`CHECKPOINT_PARTS`) of the checkpoint at ``steps``."""
+    infix, ext = CHECKPOINT_PARTS[part]
+    return Path(folder) / f"{algo}_{infix}{steps}_steps.{ext}"
+
+
+def read_saved_config(path: Path) -> dict[str, Any]:
+    """A run's ``config.json`` (``PolicyFileError`` naming it when it is no JSON object)."""
+    try:
+        saved = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:  # JSONDecodeError and UnicodeDecodeError
+        raise PolicyFileError(path, f"not a readable run configuration ({exc})") from None
+    if not isinstance(saved, dict):
+        raise PolicyFileError(path, "not a run configuration (no JSON object)")
+    return saved
+
+
 def observation_stats_path(model_path: str | Path) -> Path | None:
-    """The ``VecNormalize`` statistics saved with a model: ``vecnormalize.pkl`` beside it, or for
-    a checkpoint ``<algo>_<N>_steps.zip`` its ``<algo>_vecnormalize_<N>_steps.pkl`` (SB3's
-    ``CheckpointCallback`` naming); ``None`` when there are none."""
+    """The observation statistics saved with a model: ``obs_rms.npz`` beside it, or for a
+    checkpoint ``<algo>_<N>_steps.zip`` its ``<algo>_obs_rms_<N>_steps.npz``; ``None`` when
+    there are none. ``PolicyFileError`` when there is only SB3's pickle of them
+    (``vecnormalize.pkl``, ``<algo>_vecnormalize_<N>_steps.pkl``): unpickling it would run code
+    from the file, and acting without the statistics would act on unscaled observations."""
     path = Path(model_path)
-    beside = path.parent / VECNORM_FILE
-    if beside.is_file():
-        return beside
     parts = _checkpoint_parts(path)
-    checkpoint = None if parts is None else path.parent / f"{parts[0]}_vecnormalize_{parts[1]}.pkl"
-    return checkpoint if checkpoint is not None and checkpoint.is_file() else None
+    candidates = [(path.parent / OBS_STATS_FILE, path.parent / PICKLED_STATS_FILE)]
+    if parts is not None:
+        algo, steps = parts[0], int(parts[1][: -len("_steps")])
+        candidates.append((checkpoint_path(path.parent, algo, steps, "obs_rms"),
+                           path.parent / f"{algo}_vecnormalize_{steps}_steps.pkl"))
+    for stats, pickled in candidates:
+        if stats.is_file():
+            return stats
+        if pickled.is_file():
+            raise PolicyFileError(pickled, f"the observation statistics of {path} are an SB3 pickle, which is not "
+                                           "loaded (unpickling runs code from the file); retrain with this version, "
+                                           f"which writes {stats.name}")
+    return None
 
 
 def _no_rate(_progress_remaining: float) -> float:
@@ -63,37 +103,52 @@ def load_model(model_path: str | Path, algo: str | None = None) -> Any:
     """Load a saved PPO/SAC model for acting; the algorithm comes from ``config.json`` beside it if
     not given. Its learning-rate schedule is not unpickled (acting needs none, and a schedule class
     a run was saved with, e.g. :class:`~sms3d_env.training.schedules.WallAwareLinearSchedule`,
-    need not be importable where the model is used)."""
-    from stable_baselines3 import PPO, SAC
-
+    need not be importable where the model is used). A file that SB3 cannot load (no zip, a cut
+    one, a zip of something else) raises ``PolicyFileError`` naming it. Loading runs code pickled
+    in the file: load only models you trust."""
     path = Path(model_path)
-    no_schedule = {"learning_rate": 0.0, "lr_schedule": _no_rate}
     if algo is None:
         cfg_file = saved_config_path(path)
         if cfg_file is not None:
-            algo = json.loads(cfg_file.read_text()).get("algo")
-    if algo is not None:
-        if algo not in ALGOS:
-            raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
-        return (PPO if algo == "ppo" else SAC).load(str(path), device="cpu", custom_objects=no_schedule)
-    try:
-        return PPO.load(str(path), device="cpu", custom_objects=no_schedule)
-    except Exception:  # not a PPO archive
-        return SAC.load(str(path), device="cpu", custom_objects=no_schedule)
+            algo = read_saved_config(cfg_file).get("algo")
+    if algo is not None and algo not in ALGOS:
+        raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
+    return load_sb3(path, (algo,) if algo else ALGOS, custom_objects={"learning_rate": 0.0, "lr_schedule": _no_rate})
+
+
+def load_sb3(path: Path, algos: tuple[str, ...], **kwargs: Any) -> Any:
+    """``PPO.load``/``SAC.load`` of ``path`` (the first of ``algos`` that loads it, on the CPU unless
+    ``kwargs`` say otherwise); ``PolicyFileError`` naming the file when none does."""
+    from stable_baselines3 import PPO, SAC
+
+    kwargs = {"device": "cpu", **kwargs}
+    failures = []
+    for algo in algos:
+        try:
+            return (PPO if algo == "ppo" else SAC).load(str(path), **kwargs)
+        except Exception as exc:  # noqa: BLE001  (SB3 raises AssertionError, KeyError, ValueError, ... for bad files)
+            failures.append(f"{algo}: {type(exc).__name__}: {exc}")
+    raise PolicyFileError(path, f"not a stable-baselines3 {'/'.join(a.upper() for a in algos)} model, or cut short "
+                                f"({'; '.join(failures)}); retrain it or copy it again")
 
 
 class PolicyActor:
     """A saved SB3 model as ``actor(obs) -> action``, its observation statistics applied when they
     were saved with it (:func:`observation_stats_path`). ``env_id``/``env_options``: what it was trained on
-    (:func:`saved_config_path`; ``SMS3DPick-v0`` with no options if there is none)."""
+    (:func:`saved_config_path`; ``SMS3DPick-v0`` with no options if there is none).
+
+    Files that cannot be used raise ``PolicyFileError`` naming them, here or, for a
+    ``config.json`` whose env does not give the observation the policy was trained on, in
+    :meth:`make_env` (before any step). Loading runs code pickled in the model zip: load only
+    models you trust."""
 
     def __init__(self, model_path: str | Path, algo: str | None = None, deterministic: bool = True) -> None:
         path = Path(model_path)
         if not path.is_file():
             raise FileNotFoundError(f"model not found: {path}")
         self.path, self.deterministic = path, deterministic
-        cfg_file = saved_config_path(path)
-        self.saved: dict[str, Any] = {} if cfg_file is None else json.loads(cfg_file.read_text())
+        self.config_path = saved_config_path(path)
+        self.saved: dict[str, Any] = {} if self.config_path is None else read_saved_config(self.config_path)
         self.env_id = self.saved.get("env_id", "SMS3DPick-v0")
         self.env_options = dict(self.saved.get("env_options", {}))
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
@@ -104,27 +159,52 @@ class PolicyActor:
         # A policy trained on the flattened observation: the keys in their concatenation order.
         self.observation_keys: list[str] | None = self.saved.get("observation_keys")
         if self.saved.get("flat_observation") and self.observation_keys is None:
-            raise ValueError(f"{cfg_file}: flat_observation is set but observation_keys (the flattening "
-                             "order) is missing; retrain, or add the keys of the env's observation space")
+            raise PolicyFileError(self.config_path, "flat_observation is set but observation_keys (the flattening "
+                                                    "order) is missing; retrain, or add the keys of the env's "
+                                                    "observation space")
         self.model = load_model(path, algo)
-        self.obs_stats = None
         stats = observation_stats_path(path)
-        if stats is not None:
-            import pickle
-
-            with open(stats, "rb") as f:
-                self.obs_stats = pickle.load(f)  # SB3 VecNormalize, saved by train_policy
+        self.obs_stats = None if stats is None else ObservationStats.load(stats)
+        if self.obs_stats is None and self.saved.get("normalize"):
+            raise PolicyFileError(path, f"was trained on normalised observations, but no {OBS_STATS_FILE} "
+                                        "(or its checkpoint's) lies beside it")
 
     def make_env(self, **kwargs: Any) -> Any:
         """The env this policy runs in: its env id and options, inside the residual wrapper it
         was trained in (if any), with ``kwargs`` (bed size, pose source, ...) for the rest. Its
         observation is the dict one even for a policy trained on the flattened observation
-        (``__call__`` flattens it)."""
+        (``__call__`` flattens it). ``PolicyFileError`` naming ``config.json`` when that env's
+        observation is not the one the policy was trained on."""
         from sms3d_env.training.envs import make_env
 
-        return make_env(self.env_id, self.residual_scale, self.residual_until_held, self.residual_approach_only,
-                        self.residual_descend_trigger, residual_trigger_only=self.residual_trigger_only,
-                        **{**kwargs, **self.env_options})
+        env = make_env(self.env_id, self.residual_scale, self.residual_until_held, self.residual_approach_only,
+                       self.residual_descend_trigger, residual_trigger_only=self.residual_trigger_only,
+                       **{**kwargs, **self.env_options})
+        try:
+            self._check_observation(env.observation_space)
+        except PolicyFileError:
+            env.close()
+            raise
+        return env
+
+    def _check_observation(self, space: Any) -> None:
+        """``space`` (the env's dict observation) has the keys and sizes the policy was trained on."""
+        env_sizes = {k: int(np.prod(s.shape)) for k, s in space.spaces.items()}
+        trained = self.model.observation_space
+        if self.observation_keys is not None:
+            keys, size = list(self.observation_keys), int(np.prod(trained.shape))
+            wrong = [] if sum(env_sizes.get(k, 0) for k in keys) == size else [f"{size} flattened entries"]
+        else:
+            keys = list(trained.spaces)
+            wrong = [f"{k} ({int(np.prod(s.shape))} entries, the env's {env_sizes[k]})"
+                     for k, s in trained.spaces.items() if k in env_sizes and env_sizes[k] != int(np.prod(s.shape))]
+        missing, extra = sorted(set(keys) - set(env_sizes)), sorted(set(env_sizes) - set(keys))
+        if missing or extra or wrong:
+            where = self.config_path or f"{self.path} (no config.json beside it)"
+            raise PolicyFileError(where, f"describes an env ({self.env_id}, options {self.env_options}) whose "
+                                         f"observation does not fit the policy {self.path}: missing keys {missing}, "
+                                         f"extra keys {extra}" + (f", other sizes: {', '.join(wrong)}" if wrong else "")
+                                  + "; a config.json from another run?")
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         if self.observation_keys is not None:  # as gymnasium's FlattenObservation did in training

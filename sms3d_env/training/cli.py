@@ -7,6 +7,9 @@ import json
 from pathlib import Path
 from typing import Any
 
+from generator.errors import ConfigError
+from generator.files import write_atomic
+from generator.run_folder import RunFolderError
 from sms3d_env.training.config import (
     ALGOS,
     ENV_IDS,
@@ -21,7 +24,11 @@ from sms3d_env.training.config import (
 )
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
 from sms3d_env.training.imitation import TEACHERS
+from sms3d_env.training.model_files import PolicyFileError
 from sms3d_env.training.rl import InitModelError, train_policy
+
+#: What the training commands raise, before writing anything, for input they cannot use.
+INPUT_ERRORS = (InitModelError, RunFolderError, PolicyFileError)
 
 
 def _cmd_train(args: Any) -> int:
@@ -69,8 +76,8 @@ def _cmd_train(args: Any) -> int:
         print(f"error: {e}")
         return 2
     try:
-        summary = train_policy(cfg)
-    except InitModelError as e:  # raised before any training
+        summary = train_policy(cfg, overwrite=args.overwrite)
+    except INPUT_ERRORS as e:  # raised before any training
         print(f"error: {e}")
         return 2
     print(json.dumps(summary, indent=2))
@@ -116,7 +123,12 @@ def _cmd_train_bc(args: Any) -> int:
     except ValueError as e:
         print(f"error: {e}")
         return 2
-    print(json.dumps(train_bc(cfg), indent=2))
+    try:
+        summary = train_bc(cfg, overwrite=args.overwrite)
+    except INPUT_ERRORS as e:
+        print(f"error: {e}")
+        return 2
+    print(json.dumps(summary, indent=2))
     return 0
 
 
@@ -131,15 +143,26 @@ def _cmd_train_trigger(args: Any) -> int:
     except ValueError as e:
         print(f"error: {e}")
         return 2
-    print(json.dumps(train_trigger(cfg), indent=2))
+    try:
+        summary = train_trigger(cfg, overwrite=args.overwrite)
+    except INPUT_ERRORS as e:
+        print(f"error: {e}")
+        return 2
+    print(json.dumps(summary, indent=2))
     return 0
 
 
 def _cmd_eval(args: Any) -> int:
+    if args.json is not None and (not str(args.json).strip() or Path(args.json).is_dir()):
+        print(f"error: argument --json: must name a file to write, got {args.json!r}")
+        return 2
     try:
         res = evaluate_policy_success(args.model, episodes=args.episodes, pose_error_deg=args.pose_error_deg,
                                       seed=args.seed, num_mushrooms=args.num_mushrooms, progress=True)
-    except (ValueError, FileNotFoundError) as e:
+    except ConfigError as e:  # an argument, named by its flag
+        print(f"error: argument --{e.field.replace('_', '-')}: {e.message}")
+        return 2
+    except (ValueError, FileNotFoundError) as e:  # PolicyFileError names the file
         print(f"error: {e}")
         return 2
     text = json.dumps({k: v for k, v in res.items() if k != "per_episode"}, indent=2)
@@ -147,7 +170,7 @@ def _cmd_eval(args: Any) -> int:
     print(success_line(res))
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(res, indent=2))
+        write_atomic(args.json, json.dumps(res, indent=2))
     return 0
 
 
@@ -212,7 +235,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--log-std-init", type=float, default=None,
                    help="initial log standard deviation of the policy (default 0; -1.6 for --recipe residual)")
     p.add_argument("--reward-type", choices=REWARD_TYPES, default=defaults.reward_type)
-    p.add_argument("--out", default=defaults.out, help="run folder (model.zip, progress.csv, ...)")
+    p.add_argument("--out", default=defaults.out,
+                   help="run folder (model.zip, progress.csv, ...); a rerun with the same settings resumes it "
+                        "from its latest checkpoint, other settings are refused (see --overwrite)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="empty --out and start anew when it holds a run made with other settings")
     p.add_argument("--seed", type=int, default=defaults.seed)
     p.add_argument("--num-mushrooms", type=int, default=defaults.num_mushrooms)
     p.add_argument("--eval-episodes", type=int, default=defaults.eval_episodes,
@@ -289,7 +316,12 @@ def register(subparsers: Any) -> None:
     t = subparsers.add_parser(
         "train-trigger", help="learn when to give up on the scripted approach and descend, from paired "
                               "counterfactual rollouts (a trigger-only residual; sms3d_env.training.trigger_rollouts)")
-    t.add_argument("--out", default=tdef.out, help="run folder (labels/, model.zip, config.json, summary.json)")
+    t.add_argument("--out", default=tdef.out,
+                   help="run folder (labels/, model.zip, config.json, summary.json); a rerun with the same "
+                        "settings resumes it (--episodes may grow: the missing labels are collected), other "
+                        "settings are refused (see --overwrite)")
+    t.add_argument("--overwrite", action="store_true",
+                   help="empty --out and start anew when it holds a run made with other settings")
     t.add_argument("--episodes", type=int, default=tdef.episodes, help="training episodes (one seed each)")
     t.add_argument("--seed", type=int, default=tdef.seed,
                    help="first episode seed (the study's held-out episodes start at 1000000)")

@@ -18,6 +18,19 @@ REWARD_POSES = ("estimate", "truth")  # = sms3d_env.env_args.REWARD_POSES
 SUCCESS_PAYOFFS = ("time_left", "fixed")  # = sms3d_env.env_args.SUCCESS_PAYOFFS
 
 
+def check_bed_size(field: str, value: Any) -> None:
+    """``generator.errors.ConfigError`` (a ``ValueError``) naming ``field`` unless ``value`` is a
+    bed size the generator makes (its own range), so that a command refuses it before it writes
+    anything, not when it builds its envs."""
+    import generator
+    from generator.errors import ConfigError
+
+    try:
+        generator.SceneConfig().replace(placement__num_mushrooms=value)
+    except ConfigError as exc:
+        raise ConfigError(field, exc.message) from None
+
+
 def env_options(posture_target: str = "estimate") -> dict[str, Any]:
     """The env options beyond the env id's defaults that a policy is trained (and must be run) with."""
     return {} if posture_target == "estimate" else {"posture_target": posture_target}
@@ -290,6 +303,7 @@ class TrainConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise bad(name, "must be an integer >= 1")
+        check_bed_size("TrainConfig.num_mushrooms", self.num_mushrooms)
         for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose", "scene_pool",
                      "critic_warmup_steps"):
             v = getattr(self, name)

@@ -11,8 +11,9 @@ from typing import Any
 
 import numpy as np
 
+from generator.errors import ConfigError
 from sms3d_env.training.actor import SHIPPED_POLICY, PolicyActor
-from sms3d_env.training.config import env_kwargs
+from sms3d_env.training.config import check_bed_size, env_kwargs
 
 
 def evaluate_policy_success(model_path: str | Path | None = None, episodes: int = 30,
@@ -28,6 +29,9 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
     trained on 10 and 25, is evaluated on 25). Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for
     every model and pose error.
 
+    Bad arguments raise ``generator.errors.ConfigError`` naming the argument (a ``ValueError``);
+    unusable model files ``PolicyFileError`` naming the file.
+
     Returns ``{"episodes", "successes", "success_rate", "ci95": (lo, hi), "reachable",
     "success_rate_reachable", "failure_causes": {cause: count}, "target_detached_at_end",
     "target_held_at_end" (episode counts), "mean_return", "mean_steps", "per_episode" (success
@@ -37,13 +41,14 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
 
     from sms3d_env.study.report import wilson_interval
 
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
-        raise ValueError(f"episodes must be an integer >= 1, got {episodes!r}")
-    if not (math.isfinite(pose_error_deg) and pose_error_deg >= 0):
-        raise ValueError(f"pose_error_deg must be a finite number >= 0, got {pose_error_deg!r}")
-    if num_mushrooms is not None and (isinstance(num_mushrooms, bool) or not isinstance(num_mushrooms, int)
-                                      or num_mushrooms < 1):
-        raise ValueError(f"num_mushrooms must be an integer >= 1, got {num_mushrooms!r}")
+    for name, value, least in (("episodes", episodes, 1), ("seed", seed, 0),
+                               ("max_episode_steps", max_episode_steps, 1)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
+            raise ConfigError(name, f"must be an integer >= {least}, got {value!r}")
+    if not (isinstance(pose_error_deg, (int, float)) and math.isfinite(pose_error_deg) and pose_error_deg >= 0):
+        raise ConfigError("pose_error_deg", f"must be a finite number >= 0, got {pose_error_deg!r}")
+    if num_mushrooms is not None:
+        check_bed_size("num_mushrooms", num_mushrooms)
     actor = PolicyActor(SHIPPED_POLICY if model_path is None else model_path, algo, deterministic)
     trained_on = actor.saved.get("num_mushrooms")
     num_mushrooms = num_mushrooms or (trained_on if isinstance(trained_on, int) else 25)

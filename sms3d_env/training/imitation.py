@@ -14,9 +14,11 @@ Imitation Learning"): the scripted picker acts with Gaussian noise added to its 
 every visited state is labelled with the picker's *clean* action, so the clone sees (and learns to
 correct) states a little off the picker's own path. Only successful episodes are kept.
 
-``train_bc(BCConfig(...))`` writes into ``out``: ``demos.npz`` (reused on a re-run with the same
-demonstration settings), ``model.zip``, ``config.json`` (the env id and options the policy needs)
-and ``summary.json``.
+``train_bc(BCConfig(...))`` writes into ``out``: ``demos.npz`` and ``dagger_<round>.npz`` (reused
+by a rerun), ``model.zip``, ``config.json`` (the env id and options the policy needs) and
+``summary.json``, each atomically. ``out`` is a run folder (:mod:`generator.run_folder`): a rerun
+with the same settings resumes (with the data saved so far) or, finished, does nothing; other
+settings are refused unless ``overwrite``.
 """
 
 from __future__ import annotations
@@ -30,8 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from generator.files import read_npz_made_with, save_npz_atomic
-from sms3d_env.training.config import POSTURE_TARGETS, env_options
+from generator.files import read_npz_made_with, save_npz_atomic, write_atomic
+from generator.run_folder import open_run_folder
+from sms3d_env.training.config import POSTURE_TARGETS, check_bed_size, env_options
+from sms3d_env.training.model_files import finished_run, run_settings, save_model
 
 TRAIN_ENV_ID = "SMS3DPickTrain-v0"
 TEACHERS = ("estimate", "truth")
@@ -102,9 +106,10 @@ class BCConfig:
                 raise bad(name, "must be an integer >= 0")
         object.__setattr__(self, "num_mushrooms", tuple(self.num_mushrooms))
         object.__setattr__(self, "net_arch", tuple(self.net_arch))
-        if not self.num_mushrooms or any(isinstance(n, bool) or not isinstance(n, int) or n < 1
-                                         for n in self.num_mushrooms):
-            raise bad("num_mushrooms", "must be a non-empty sequence of integers >= 1")
+        if not self.num_mushrooms:
+            raise bad("num_mushrooms", "must be a non-empty sequence of bed sizes")
+        for n in self.num_mushrooms:
+            check_bed_size("BCConfig.num_mushrooms", n)
         if not self.net_arch or any(isinstance(h, bool) or not isinstance(h, int) or h < 1
                                     for h in self.net_arch):
             raise bad("net_arch", "must be a non-empty sequence of integers >= 1")
@@ -325,16 +330,24 @@ def behaviour_clone(model: Any, demos: dict[str, np.ndarray], epochs: int, batch
     return losses
 
 
-def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
+def train_bc(cfg: BCConfig, progress: bool = True, overwrite: bool = False) -> dict[str, Any]:
     """Collect (or reuse) demonstrations, clone them, save ``model.zip`` + ``config.json`` +
-    ``summary.json`` in ``cfg.out``; returns the summary."""
+    ``summary.json`` in ``cfg.out``; returns the summary. ``cfg.out`` is a run folder
+    (``RunFolderError`` for one made with other settings, ``torch_threads`` aside, unless
+    ``overwrite``)."""
     import gymnasium as gym
 
     import sms3d_env
     from sms3d_env.training.threads import torch_threads
 
-    out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
+    run = open_run_folder(cfg.out, run_settings(asdict(cfg)), overwrite=overwrite, may_change=("torch_threads",))
+    out = run.path
+    if run.resumed:
+        finished = finished_run(out)
+        if finished is not None:
+            return finished
+        saved = [p.name for p in sorted(out.glob("*.npz")) if ".tmp" not in p.suffixes]  # no killed write's
+        print(f"resuming {out}: reusing {', '.join(saved) if saved else 'no saved data yet'}")
     with torch_threads(cfg.torch_threads):
         t0 = time.perf_counter()
         demos = load_or_collect(cfg, progress)
@@ -361,17 +374,17 @@ def train_bc(cfg: BCConfig, progress: bool = True) -> dict[str, Any]:
             losses += behaviour_clone(model, data, cfg.dagger_epochs, cfg.batch_size,
                                       cfg.learning_rate, cfg.seed + r, progress)
         wall = time.perf_counter() - t0
-    model.save(str(out / "model.zip"))
     config = {"recipe": "bc", "algo": "ppo", "env_id": TRAIN_ENV_ID,
               "env_options": {**sms3d_env.TRAIN_OPTIONS, **env_options(cfg.posture_target)},
               "max_episode_steps": 250,
               **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
-    (out / "config.json").write_text(json.dumps(config, indent=2))
+    write_atomic(out / "config.json", json.dumps(config, indent=2))
+    save_model(model, out / "model.zip")
     summary = {"recipe": "bc", "demo_episodes": cfg.episodes,
                "demo_episodes_kept": int(len(np.unique(demos["episode"]))),
                "demo_steps": int(len(demos["actions"])), "dagger_rounds": cfg.dagger_rounds,
                "training_steps": int(len(data["actions"])), "final_loss": losses[-1],
                "demo_wall_s": round(t_demo, 1), "wall_s": round(wall, 1),
                "model": str(out / "model.zip")}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_atomic(out / "summary.json", json.dumps(summary, indent=2))
     return summary

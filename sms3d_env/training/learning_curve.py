@@ -112,8 +112,12 @@ def plot_curves(runs: dict[str, list[dict[str, float]]], path: str | Path) -> No
 def _cmd(args: Any) -> int:
     import sys
 
+    from sms3d_env.study.report import check_figure_path, distinct_names
+
     try:
-        runs = {Path(r).name: read_curve(r) for r in args.runs}
+        check_figure_path(args.out)
+        # Runs are labelled by path, so that two runs of one name (seed0 of two sweeps) are two lines.
+        runs = {name: read_curve(r) for r, name in zip(args.runs, distinct_names(args.runs), strict=True)}
     except (FileNotFoundError, ValueError) as exc:
         print(f"sms3d learning-curve: error: {exc}", file=sys.stderr)
         return 2

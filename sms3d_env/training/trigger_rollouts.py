@@ -29,9 +29,12 @@ estimated pose, the arm's state, the wrist wrench, the stand-off gap and the too
 never the true pose.
 
 ``train_trigger(TriggerConfig(...))`` writes into ``out``: ``labels/`` (one ``.npz`` per chunk of
-episodes, written atomically; a re-run with the same settings reuses them, so an interrupted
-collection resumes), ``model.zip``, ``config.json`` (the env and wrapper the policy runs in:
-``sms3d sweep --picker residual:OUT/model.zip`` loads it) and ``summary.json``.
+episodes, ``episodes_<first>-<last>.npz``, written atomically; a rerun reuses them, so an
+interrupted collection resumes and a run grown by more ``episodes`` collects only the missing
+ones), ``model.zip``, ``config.json`` (the env and wrapper the policy runs in:
+``sms3d sweep --picker residual:OUT/model.zip`` loads it) and ``summary.json``, each atomically.
+``out`` is a run folder (:mod:`generator.run_folder`): a rerun with other settings than
+``episodes``, ``workers`` and ``torch_threads`` is refused unless ``overwrite``.
 """
 
 from __future__ import annotations
@@ -45,10 +48,16 @@ from typing import Any
 
 import numpy as np
 
-from sms3d_env.training.config import POSTURE_TARGETS, env_options
+from generator.files import read_npz_made_with, write_atomic
+from generator.run_folder import open_run_folder
+from sms3d_env.training.config import POSTURE_TARGETS, check_bed_size, env_options
+from sms3d_env.training.model_files import finished_run, run_settings, save_model
 
 #: Episodes per label file (and per worker task).
 CHUNK_EPISODES = 20
+#: ``TriggerConfig`` fields a rerun may change: more episodes extend the run (their labels are
+#: collected, the trigger fitted on all), the others say how it is carried out.
+EXTENSIBLE_FIELDS = ("episodes", "workers", "torch_threads")
 #: The residual wrapper's scale in the saved configuration: a trigger-only residual does not use
 #: it, but ``make_env`` wraps an env only for a positive scale.
 TRIGGER_ONLY_SCALE = 1.0
@@ -99,6 +108,7 @@ class TriggerConfig:
                 raise bad(name, "must be an integer >= 1")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
             raise bad("seed", "must be an integer >= 0")
+        check_bed_size("TriggerConfig.num_mushrooms", self.num_mushrooms)
         lo_hi = self.pose_error_range_deg
         if (len(lo_hi) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in lo_hi)
                 or not 0 <= lo_hi[0] <= lo_hi[1] <= 90):
@@ -113,10 +123,11 @@ class TriggerConfig:
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
             raise bad("net_arch", "must list at least one layer width >= 1")
 
-    def label_settings(self) -> dict[str, Any]:
-        """What the labels depend on: a label file made with other settings is made again."""
+    def label_settings(self, first: int, stop: int) -> dict[str, Any]:
+        """What the label file of episodes ``first .. stop - 1`` holds and depends on: a file made
+        with other settings, or for other episodes, is not reused for it."""
         return {"num_mushrooms": self.num_mushrooms, "pose_error_range_deg": list(self.pose_error_range_deg),
-                "posture_target": self.posture_target, "candidates": self.candidates}
+                "posture_target": self.posture_target, "candidates": self.candidates, "episodes": [first, stop]}
 
 
 def trigger_env(cfg: TriggerConfig) -> Any:
@@ -157,15 +168,15 @@ def label_episode(env: Any, seed: int, candidates: int) -> tuple[list[dict], lis
     return [o for _, o in reachable], labels, base
 
 
-def _label_chunk(cfg: TriggerConfig, first: int, path: str) -> str:
-    """Label episodes ``first ..`` (a chunk) and write them to ``path`` atomically."""
+def _label_chunk(cfg: TriggerConfig, first: int, stop: int, path: str) -> str:
+    """Label episodes ``first .. stop - 1`` (a chunk) and write them to ``path`` atomically."""
     from generator.files import save_npz_atomic
 
     env = trigger_env(cfg)
     rows: dict[str, list[np.ndarray]] = {}
     labels, episode, base = [], [], []
     try:
-        for seed in range(first, min(first + CHUNK_EPISODES, cfg.seed + cfg.episodes)):
+        for seed in range(first, stop):
             observations, ys, success = label_episode(env, seed, cfg.candidates)
             for o in observations:
                 for k, v in o.items():
@@ -178,37 +189,63 @@ def _label_chunk(cfg: TriggerConfig, first: int, path: str) -> str:
     arrays = {k: np.stack(v) for k, v in rows.items()}
     arrays.update(labels=np.asarray(labels, np.int8), episode=np.asarray(episode, np.int64),
                   scripted_success=np.asarray(base, bool))
-    save_npz_atomic(Path(path), arrays, cfg.label_settings())
+    save_npz_atomic(Path(path), arrays, cfg.label_settings(first, stop))
     return path
 
 
+def _label_file(folder: Path, first: int, stop: int) -> Path:
+    return folder / f"episodes_{first}-{stop - 1}.npz"
+
+
+def label_chunks(cfg: TriggerConfig) -> list[tuple[int, int, Path, bool]]:
+    """The chunks of ``cfg``'s episodes, in order: ``(first, stop, file, made)``. A file in
+    ``out/labels/`` made with these settings covers its episodes where it starts at a chunk's
+    first episode and ends within the run (so a run grown by more episodes keeps its last, short
+    chunk and adds the missing episodes); the rest is cut into new chunks of ``CHUNK_EPISODES``."""
+    folder = Path(cfg.out) / "labels"
+    end = cfg.seed + cfg.episodes
+    made: dict[int, list[int]] = {}
+    for path in folder.glob("episodes_*-*.npz"):
+        first, _, last = path.stem.removeprefix("episodes_").partition("-")
+        if first.isdigit() and last.isdigit() and int(last) < end:
+            made.setdefault(int(first), []).append(int(last) + 1)
+    chunks, first = [], cfg.seed
+    while first < end:
+        stop = next((s for s in sorted(made.get(first, []), reverse=True)
+                     if read_npz_made_with(_label_file(folder, first, s), cfg.label_settings(first, s)) is not None),
+                    None)
+        if stop is not None:
+            chunks.append((first, stop, _label_file(folder, first, stop), True))
+        else:
+            stop = min([first + CHUNK_EPISODES, end, *(f for f in made if f > first)])
+            chunks.append((first, stop, _label_file(folder, first, stop), False))
+        first = stop
+    return chunks
+
+
 def collect_labels(cfg: TriggerConfig, progress: bool = True) -> dict[str, np.ndarray]:
-    """Every chunk's labels (``out/labels/``), collecting the chunks that are missing or were
-    made with other settings; observations per key, ``labels``, ``episode`` and the scripted
-    success of every episode (``scripted_success``, per episode, not per label)."""
+    """Every chunk's labels (``out/labels/``, :func:`label_chunks`), collecting the chunks not made
+    yet; observations per key, ``labels``, ``episode`` and the scripted success of every episode
+    (``scripted_success``, per episode, not per label)."""
     from tqdm.auto import tqdm
 
-    from generator.files import read_npz_made_with
     from generator.processes import worker_pool
 
-    folder = Path(cfg.out) / "labels"
-    folder.mkdir(parents=True, exist_ok=True)
-    firsts = range(cfg.seed, cfg.seed + cfg.episodes, CHUNK_EPISODES)
-    paths = {f: str(folder / f"episodes_{f}.npz") for f in firsts}
-
-    todo = [f for f in firsts if read_npz_made_with(Path(paths[f]), cfg.label_settings()) is None]
-    bar = tqdm(total=len(firsts), initial=len(firsts) - len(todo), desc="trigger labels (chunks)",
+    chunks = label_chunks(cfg)
+    chunks[0][2].parent.mkdir(parents=True, exist_ok=True)
+    todo = [(first, stop, str(path)) for first, stop, path, made in chunks if not made]
+    bar = tqdm(total=len(chunks), initial=len(chunks) - len(todo), desc="trigger labels (chunks)",
                disable=not progress)
     if cfg.workers <= 1:
-        for f in todo:
-            _label_chunk(cfg, f, paths[f])
+        for first, stop, path in todo:
+            _label_chunk(cfg, first, stop, path)
             bar.update()
     else:
         with worker_pool(cfg.workers) as pool:
-            for _ in pool.map(_label_chunk, [cfg] * len(todo), todo, [paths[f] for f in todo]):
+            for _ in pool.map(_label_chunk, [cfg] * len(todo), *zip(*todo, strict=True)):
                 bar.update()
     bar.close()
-    parts = [read_npz_made_with(Path(paths[f]), cfg.label_settings()) for f in firsts]
+    parts = [read_npz_made_with(path, cfg.label_settings(first, stop)) for first, stop, path, _ in chunks]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
@@ -230,15 +267,25 @@ def fit_trigger(cfg: TriggerConfig, labels: dict[str, np.ndarray], progress: boo
     return model, losses
 
 
-def train_trigger(cfg: TriggerConfig, progress: bool = True) -> dict[str, Any]:
+def train_trigger(cfg: TriggerConfig, progress: bool = True, overwrite: bool = False) -> dict[str, Any]:
     """Collect (or reuse) the labels, fit the trigger, save ``model.zip``, ``config.json`` and
-    ``summary.json`` in ``cfg.out``; returns the summary."""
+    ``summary.json`` in ``cfg.out``; returns the summary. ``cfg.out`` is a run folder
+    (``RunFolderError`` for one made with other settings, ``EXTENSIBLE_FIELDS`` aside, unless
+    ``overwrite``); a finished run with these ``episodes`` does nothing."""
     import sms3d_env
     from sms3d_env.training.imitation import TRAIN_ENV_ID
     from sms3d_env.training.threads import torch_threads
 
-    out = Path(cfg.out)
-    out.mkdir(parents=True, exist_ok=True)
+    run = open_run_folder(cfg.out, run_settings(asdict(cfg)), overwrite=overwrite, may_change=EXTENSIBLE_FIELDS)
+    out = run.path
+    if run.resumed:
+        finished = finished_run(out, episodes=cfg.episodes)
+        if finished is not None:
+            return finished
+        # A summary of fewer episodes is not this run's: the run is unfinished until it writes its own.
+        (out / "summary.json").unlink(missing_ok=True)
+        labelled = sum(stop - first for first, stop, _, made in label_chunks(cfg) if made)
+        print(f"resuming {out}: {labelled} of {cfg.episodes} episodes labelled")
     with torch_threads(cfg.torch_threads):
         t0 = time.perf_counter()
         labels = collect_labels(cfg, progress)
@@ -249,7 +296,6 @@ def train_trigger(cfg: TriggerConfig, progress: bool = True) -> dict[str, Any]:
         model, losses = fit_trigger(cfg, labels, progress)
         mean = model.predict({k: labels[k] for k in model.observation_space.spaces}, deterministic=True)[0]
         wall = time.perf_counter() - t0
-    model.save(str(out / "model.zip"))
     from sms3d_env.training.residual import DESCEND_TRIGGER
 
     config = {"recipe": "trigger-rollouts", "algo": "ppo", "env_id": TRAIN_ENV_ID,
@@ -257,7 +303,8 @@ def train_trigger(cfg: TriggerConfig, progress: bool = True) -> dict[str, Any]:
               "max_episode_steps": 250, "residual_scale": TRIGGER_ONLY_SCALE,
               "residual_descend_trigger": True, "residual_trigger_only": True,
               **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
-    (out / "config.json").write_text(json.dumps(config, indent=2))
+    write_atomic(out / "config.json", json.dumps(config, indent=2))
+    save_model(model, out / "model.zip")
     y = labels["labels"]
     fires = mean[:, 0] > DESCEND_TRIGGER
     summary = {"recipe": "trigger-rollouts", "episodes": cfg.episodes,
@@ -267,5 +314,5 @@ def train_trigger(cfg: TriggerConfig, progress: bool = True) -> dict[str, Any]:
                "mean_label_where_it_fires": float(y[fires].mean()) if fires.any() else None,
                "final_loss": losses[-1], "labels_wall_s": round(t_labels, 1), "wall_s": round(wall, 1),
                "model": str(out / "model.zip")}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_atomic(out / "summary.json", json.dumps(summary, indent=2))
     return summary

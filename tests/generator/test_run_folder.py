@@ -41,10 +41,11 @@ def test_overwrite_starts_anew(tmp_path):
     assert not run.resumed and not (tmp_path / "model.zip").exists()
 
 
-def test_a_folder_of_other_files_is_never_reused_silently(tmp_path):
+@pytest.mark.parametrize("overwrite", [False, True])
+def test_a_folder_of_other_files_is_never_reused_nor_emptied(tmp_path, overwrite):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(RunFolderError, match=SETTINGS_FILE):
-        open_run_folder(tmp_path, {"lr": 1e-3})
+        open_run_folder(tmp_path, {"lr": 1e-3}, overwrite=overwrite)
     assert (tmp_path / "notes.txt").read_text() == "mine"
 
 

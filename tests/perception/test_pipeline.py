@@ -329,7 +329,7 @@ def test_eval_pipeline_names_how_its_clouds_are_cut(tmp_path, capsys):
     save_checkpoint(path, PoseNet(PoseNetConfig(backbone="pointnet", num_points=64, hidden=16, depth_smoothing_px=3.0)))
     args = argparse.Namespace(weights=str(path), detector="oracle", soil_margin_mm=0.0, edge_tolerance_mm=0.0,
                               score_threshold=None, pose_model="points")
-    pipeline, oracle = _pipeline(args)
+    pipeline, oracle = _pipeline(args, [])  # no --data to check
     out = capsys.readouterr().out
     assert oracle and "clouds: depth smoothed in each mask, sigma 3 px (the network's setting)" in out
     depth, cap, _ = _dome_over_soil()

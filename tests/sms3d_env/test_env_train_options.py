@@ -323,6 +323,21 @@ def test_env_image_size_property(size):
         sms3d_env.SMS3DPickEnv(image_size=size)
 
 
+@settings(max_examples=40, deadline=None)
+@given(field=st.sampled_from(["image_obs", "end_on_dead_end", "task_obs"]),
+       value=st.one_of(st.text(max_size=5), st.integers(), st.floats(allow_nan=True), st.none(),
+                       st.lists(st.booleans(), max_size=2)))
+def test_env_flags_take_bools_only(field, value):
+    # By truthiness, end_on_dead_end="no" switched the option on.
+    with pytest.raises(TypeError, match=f"{field} must be True or False"):
+        sms3d_env.SMS3DPickEnv(**{field: value})
+
+
+def test_env_flags_take_numpy_bools():
+    env = sms3d_env.SMS3DPickEnv(scene_config=SMALL, end_on_dead_end=np.bool_(True), task_obs=np.False_)
+    assert env.end_on_dead_end is True and env.task_obs is False
+
+
 def test_a_zero_residual_is_the_scripted_picker_exactly():
     from sms3d_env.pickers import run_episode
     from sms3d_env.training.residual import ResidualPicker
@@ -543,3 +558,28 @@ def test_scene_pool_reuses_beds_and_replays_episodes_exactly():
     assert (again["success"], again["steps"], again["return"]) == (first["success"], first["steps"], first["return"])
     with pytest.raises(ValueError, match="scene_pool"):
         sms3d_env.SMS3DPickEnv(scene_pool=-1)
+
+
+def test_a_scene_pool_keeps_a_bounded_number_of_compiled_models(monkeypatch):
+    """A compiled model per pool bed held ~4.7 MB each without bound (2.4 GB for a 500-bed pool);
+    the pool keeps the most recently used few, and a bed compiled again is the same episode."""
+    from sms3d_env import scene_source
+
+    monkeypatch.setattr(scene_source, "MAX_CACHED_MODELS", 2)
+    env = gym.make("SMS3DPick-v0", scene_config=SMALL, scene_pool=5).unwrapped
+    seeds = range(8)
+
+    def draws():
+        out = []
+        for seed in seeds:
+            obs, _ = env.reset(seed=seed)
+            assert len(env.scene_source.models) <= 2
+            out.append((env.scene, obs))
+        return out
+
+    first = draws()
+    assert len(env.scene_source.pool) > 2  # more beds drawn than models kept
+    for (scene, obs), (again_scene, again_obs) in zip(first, draws(), strict=True):
+        assert again_scene is scene  # the same bed for the same seed
+        for key in obs:
+            np.testing.assert_array_equal(again_obs[key], obs[key])

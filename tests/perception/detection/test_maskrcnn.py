@@ -12,6 +12,7 @@ import torch
 
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
+from generator.run_folder import RunFolderError
 from perception.detection.detector import detections_from_labels
 from perception.detection.detector_data import CocoDetectionDataset
 from perception.detection.detector_eval import evaluate_detector
@@ -107,6 +108,7 @@ def test_coco_evaluation_scores_the_oracle_perfectly(beds):
         assert scores.ap > 0.95
 
 
+@pytest.mark.slow  # about 200 s on 2 cores; the resume and ResNet-50 tests below train in the default suite
 def test_short_training_overfits_a_few_scenes(beds, tmp_path):
     # From random weights, 120 iterations with the cosine schedule give mask AP50 ≈ 0.59 on these
     # two images (at a constant rate the scores swung between 0.05 and 0.26 from epoch to epoch).
@@ -126,7 +128,7 @@ def test_training_resumes_from_its_last_epoch(beds, tmp_path):
     assert (tmp_path / "last.pt").stat().st_mtime_ns == stamp
     longer = train_detector(beds, tmp_path, SMALL, DetectorTrainConfig(**{**train.__dict__, "epochs": 2}), progress=False)
     assert longer[0] == log[0] and len(longer) == 2 and (tmp_path / "log.csv").read_text().count("\n") == 3
-    with pytest.raises(PerceptionConfigError, match="resume"):
+    with pytest.raises(RunFolderError, match=r"other settings: arch \("):
         train_detector(beds, tmp_path, DetectorConfig(arch="resnet50_fpn_v2", min_size=192, max_size=256), train, progress=False)
 
 
@@ -149,6 +151,9 @@ def test_checkpoint_errors_are_named(tmp_path):
     torch.save({"format": "something-else"}, tmp_path / "other.pt")
     with pytest.raises(CheckpointFormatError, match="not a Mask R-CNN"):
         MaskRCNNDetector.from_checkpoint(tmp_path / "other.pt")
+    torch.save({**torch.load(path, weights_only=True), "model": {}}, tmp_path / "empty.pt")
+    with pytest.raises(CheckpointFormatError, match="empty.pt: weights do not fit"):
+        MaskRCNNDetector.from_checkpoint(tmp_path / "empty.pt")
 
 
 @pytest.mark.parametrize("command, flags", [

@@ -5,6 +5,8 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -13,6 +15,7 @@ from hypothesis import strategies as st
 
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
+from generator.run_folder import RunFolderError
 from perception.detection.detector import detections_from_labels, mask_iou
 from perception.detection.rgbd_segmenter import (
     OFFSET_SCALE,
@@ -71,16 +74,36 @@ def test_augmented_offsets_still_point_at_their_instance_centre(beds):
         assert torch.all(mushroom[vs, us] == 1)
 
 
-def test_training_resumes_from_its_last_epoch_and_refuses_another_network(beds, tmp_path):
+def test_training_resumes_from_its_last_epoch_and_refuses_other_settings(beds, small_dataset, tmp_path, capsys):
     train = SegmenterTrainConfig(epochs=2, batch_size=2, crop=64, lr=3e-3, warmup_iters=1, val_every=1, max_val_images=1)
-    log = train_segmenter([beds], tmp_path / "run", SegmenterConfig(widths=(8, 8, 16, 16, 16)), train, progress=False)
+    small, run = SegmenterConfig(widths=(8, 8, 16, 16, 16)), tmp_path / "run"
+    log = train_segmenter([beds], run, small, train, progress=False)
     assert [r["epoch"] for r in log] == [1, 2] and "val_mask_f1" in log[-1]
-    assert (tmp_path / "run" / "best.pt").is_file() and (tmp_path / "run" / "log.csv").is_file()
-    longer = SegmenterTrainConfig(**{**train.__dict__, "epochs": 3})
-    log = train_segmenter([beds], tmp_path / "run", SegmenterConfig(widths=(8, 8, 16, 16, 16)), longer, progress=False)
+    assert (run / "best.pt").is_file() and (run / "log.csv").is_file()
+    longer = replace(train, epochs=3)
+    capsys.readouterr()
+    log = train_segmenter([beds], run, small, longer, progress=False)
     assert [r["epoch"] for r in log] == [1, 2, 3]  # resumed: epochs 1-2 come from last.pt
-    with pytest.raises(PerceptionConfigError, match="resume"):
-        train_segmenter([beds], tmp_path / "run", SegmenterConfig(), longer, progress=False)
+    assert f"resuming {run} from epoch 2 of 3" in capsys.readouterr().err
+    # Another network was refused; other data, rate, crop or seed went on from the checkpoint.
+    for field, changed in {"widths": {"config": SegmenterConfig()}, "lr": {"train": replace(longer, lr=1e-3)},
+                           "crop": {"train": replace(longer, crop=48)}, "seed": {"train": replace(longer, seed=1)},
+                           "data": {"roots": [small_dataset(2, 6, 5, (1.0, 0.0, 0.0))]}}.items():
+        with pytest.raises(RunFolderError, match=rf"{field} \("):
+            train_segmenter(**{"roots": [beds], "out": run, "config": small, "train": longer, "progress": False,
+                               **changed})
+    assert [r["epoch"] for r in train_segmenter([beds], run, small, longer, overwrite=True, progress=False)] == [1, 2, 3]
+
+
+def test_the_command_refuses_a_batch_larger_than_the_training_images(beds, tmp_path, capsys):
+    # It trained on no batch at all and saved the untrained network, exit 0.
+    from sms3d_env.cli import main
+
+    out = tmp_path / "run"
+    assert main(["train-segmenter", "--data", str(beds), "--out", str(out), "--batch-size", "4", "--crop", "64",
+                 "--epochs", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "--batch-size" in err and "the 3 training images" in err and not out.exists()
 
 
 def test_a_saved_segmenter_detects_the_same_after_loading(beds, tmp_path):
@@ -107,6 +130,10 @@ def test_errors_name_what_is_wrong(beds, tmp_path):
         load_segmenter(bad)
     with pytest.raises(FileNotFoundError, match="missing.pt"):
         load_segmenter(tmp_path / "missing.pt")
+    small = SegmenterConfig(widths=(8, 8, 16, 16, 16))
+    save_segmenter(tmp_path / "other.pt", build_segmenter(small), SegmenterConfig())  # weights of another network
+    with pytest.raises(CheckpointFormatError, match="other.pt: weights do not fit"):
+        load_segmenter(tmp_path / "other.pt")
     segmenter = RGBDSegmenter(build_segmenter(), SegmenterConfig())
     s = read_scene_files(beds / scene_dirname(0))
     with pytest.raises(PipelineInputError, match="depth"):

@@ -134,14 +134,27 @@ def _short_training(tmp_path, models) -> None:
     assert after.mean_geodesic_deg < CHANCE_GEODESIC_DEG - 15
 
 
-def test_resume_continues_from_last_checkpoint(tmp_path, models) -> None:
+def test_a_rerun_resumes_from_the_last_checkpoint_and_other_settings_are_refused(tmp_path, models, capsys) -> None:
+    from generator.run_folder import RunFolderError
+
     s = generate_samples(48, 3, models, FAST_VIEWS)
     net = PoseNetConfig(backbone="pointnet", num_points=64)
     ds = PointCloudPoseDataset(s[:32], 64)
     val = PointCloudPoseDataset(s[32:], 64)
     _, rows1 = train(net, TrainConfig(epochs=1, progress=False), ds, val, tmp_path)
-    _, rows2 = train(net, TrainConfig(epochs=3, progress=False), ds, val, tmp_path, resume=True)
+    capsys.readouterr()
+    _, rows2 = train(net, TrainConfig(epochs=3, progress=False), ds, val, tmp_path)  # the same settings, more epochs
     assert [r["epoch"] for r in rows2] == [1, 2, 3] and rows2[0] == rows1[0]
+    assert f"resuming {tmp_path} from epoch 1 of 3" in capsys.readouterr().err
+    for field, (n, cfg, data) in {"lr": (net, TrainConfig(epochs=3, lr=1e-3, progress=False), ds),
+                                  "head": (PoseNetConfig(backbone="pointnet", head="6d_stem", num_points=64),
+                                           TrainConfig(epochs=3, progress=False), ds),
+                                  "train_data": (net, TrainConfig(epochs=3, progress=False),
+                                                 PointCloudPoseDataset(s[:31], 64))}.items():
+        with pytest.raises(RunFolderError, match=rf"other settings: {field} \("):
+            train(n, cfg, data, val, tmp_path)
+    _, rows3 = train(net, TrainConfig(epochs=1, lr=1e-3, progress=False), ds, val, tmp_path, overwrite=True)
+    assert len(rows3) == 1
 
 
 def test_init_fine_tunes_from_a_checkpoint(tmp_path, models) -> None:

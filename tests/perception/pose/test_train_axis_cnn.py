@@ -1,11 +1,14 @@
 """Training the axis CNN: crops labelled with the truth, the crop cache, a resumed run that
-draws what an uninterrupted one does, and the command's refusals."""
+draws what an uninterrupted one does, the run folder's rule (resume, refuse, overwrite), and
+the command's refusals."""
 
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import hashlib
+import json
+import shutil
 
 import numpy as np
 import pytest
@@ -15,9 +18,11 @@ from hypothesis import strategies as st
 
 from generator.dataset.readers import read_scene_files, scene_indices
 from generator.dataset.writer import scene_dirname
+from generator.run_folder import SETTINGS_FILE, RunFolderError
 from perception.detection.detector import detections_from_labels
 from perception.errors import PerceptionConfigError
 from perception.pose.axis_cnn import SHIPPED_AXIS_CNN, AxisCNNConfig, load_axis_cnn
+from perception.pose.estimator import default_weights_path
 from perception.pose.train_axis_cnn import (
     AxisTrainConfig,
     CropSet,
@@ -80,7 +85,52 @@ def test_the_crop_cache_is_reused_for_the_same_detector_and_remade_otherwise(bed
     assert detector.calls > calls
 
 
-def test_a_resumed_run_ends_where_an_uninterrupted_one_does(beds, tmp_path) -> None:
+def test_a_dataset_regenerated_at_the_same_path_gets_new_crops(tmp_path) -> None:
+    # The cache was keyed on the folder's path: a dataset regenerated there got the old crops back.
+    from generator import SceneConfig
+    from generator.dataset import DatasetOptions, generate_dataset
+
+    root = tmp_path / "beds"
+    config = SceneConfig().replace(camera__width=256, camera__height=192, camera__height_above_soil=0.25,
+                                   placement__num_mushrooms=6)
+    crop_sets = []
+    for seed in (1, 2):
+        shutil.rmtree(root, ignore_errors=True)
+        generate_dataset(root, config, 2, seed=seed, options=DatasetOptions(split_ratios=(1.0, 0.0, 0.0)), progress=False)
+        detector = _LabelDetector(root)
+        crop_sets.append(cached_crops(root, "train", detector, "a", tmp_path / "cache"))
+        assert detector.calls == 2  # cut from this dataset's two scenes, not read from the cache
+    assert len(crop_sets[1]) > 0 and not np.array_equal(crop_sets[0].crops, crop_sets[1].crops)
+
+
+def test_a_rerun_resumes_a_finished_run_and_refuses_other_settings(beds, tmp_path, capsys) -> None:
+    # A rerun trained anew and replaced best.pt with whatever it reached; another width was a
+    # state-dict traceback and another learning rate, seed or loss went on unnoticed.
+    root, detector = beds
+    train, val = crops_from_detections(root, "train", detector), crops_from_detections(root, "val", detector)
+    config = AxisTrainConfig(epochs=1, batch_size=8, warmup_iters=2)
+    out = tmp_path / "run"
+    torch.set_num_threads(1)
+    first = train_axis_cnn(train, val, out, config, progress=False)
+    written = {name: (out / name).read_bytes() for name in ("best.pt", "last.pt", "log.csv")}
+    capsys.readouterr()
+    assert train_axis_cnn(train, val, out, config, progress=False) == first
+    assert f"{out} is complete (1 of 1 epochs)" in capsys.readouterr().err
+    other = {"lr": {"config": AxisTrainConfig(epochs=1, batch_size=8, warmup_iters=2, lr=1e-2)},
+             "seed": {"config": AxisTrainConfig(epochs=1, batch_size=8, warmup_iters=2, seed=1)},
+             "loss": {"config": AxisTrainConfig(epochs=1, batch_size=8, warmup_iters=2, loss="cosine")},
+             "width": {"config": config, "net": AxisCNNConfig(width=16)},
+             "train_crops": {"config": config, "train": CropSet(train.crops[1:], train.axes[1:], train.meta[1:])}}
+    for field, changed in other.items():
+        with pytest.raises(RunFolderError, match=rf"other settings: {field} \(") as info:
+            train_axis_cnn(**{"train": train, "val": val, "out": out, "progress": False, **changed})
+        assert "--overwrite" in str(info.value)
+    assert {name: (out / name).read_bytes() for name in written} == written
+    train_axis_cnn(train, val, out, other["lr"]["config"], overwrite=True, progress=False)
+    assert json.loads((out / SETTINGS_FILE).read_text())["lr"] == 1e-2
+
+
+def test_a_resumed_run_ends_where_an_uninterrupted_one_does(beds, tmp_path, capsys) -> None:
     root, detector = beds
     train, val = crops_from_detections(root, "train", detector), crops_from_detections(root, "val", detector)
     config = AxisTrainConfig(epochs=3, batch_size=8, warmup_iters=2)
@@ -88,7 +138,9 @@ def test_a_resumed_run_ends_where_an_uninterrupted_one_does(beds, tmp_path) -> N
     straight = train_axis_cnn(train, val, tmp_path / "straight", config, progress=False)
     train_axis_cnn(train, val, tmp_path / "cut", AxisTrainConfig(epochs=3, batch_size=8, warmup_iters=2,
                                                                  time_limit_min=1e-6), progress=False)
-    resumed = train_axis_cnn(train, val, tmp_path / "cut", config, resume=True, progress=False)
+    capsys.readouterr()
+    resumed = train_axis_cnn(train, val, tmp_path / "cut", config, progress=False)  # the same settings: resumed
+    assert f"resuming {tmp_path / 'cut'} from epoch 1 of 3" in capsys.readouterr().err
     assert resumed["val_mean_axis_deg"] == pytest.approx(straight["val_mean_axis_deg"], abs=1e-9)
     a = torch.load(tmp_path / "straight" / "last.pt", weights_only=True)["model"]
     b = torch.load(tmp_path / "cut" / "last.pt", weights_only=True)["model"]
@@ -170,6 +222,53 @@ def test_the_command_refuses_oracle_masks_and_bad_settings(tmp_path, capsys) -> 
                  str(SHIPPED_AXIS_CNN), "--width", str(load_axis_cnn(SHIPPED_AXIS_CNN)[0].config.width + 8)]) == 2
     err = capsys.readouterr().err
     assert "can only grow" not in err and "manifest.json" in err
+
+
+def test_the_command_resumes_says_so_and_refuses_other_settings(beds, tmp_path, capsys) -> None:
+    from sms3d_env.cli import main
+
+    root, _ = beds
+    out = tmp_path / "run"
+    command = ["train-axis-cnn", "--out", str(out), "--scenes", str(root), "--cache", str(tmp_path / "cache"),
+               "--batch-size", "4", "--threads", "1"]
+    assert main([*command, "--epochs", "1"]) == 0
+    capsys.readouterr()
+    assert main([*command, "--epochs", "1"]) == 0  # used to train anew over the finished run
+    assert f"{out} is complete" in capsys.readouterr().err
+    assert main([*command, "--epochs", "2", "--resume"]) == 0
+    assert f"resuming {out} from epoch 1 of 2" in capsys.readouterr().err
+    best = (out / "best.pt").read_bytes()
+    assert main([*command, "--epochs", "2", "--lr", "0.01", "--seed", "1", "--loss", "cosine", "--width", "16"]) == 2
+    err = capsys.readouterr().err
+    assert all(f"{field} (" in err for field in ("lr", "seed", "loss", "width")) and "--overwrite" in err
+    assert (out / "best.pt").read_bytes() == best
+    assert main([*command, "--epochs", "1", "--lr", "0.01", "--overwrite"]) == 0
+    assert json.loads((out / SETTINGS_FILE).read_text())["lr"] == 0.01
+    assert main([*command[:2], str(tmp_path / "new"), *command[3:], "--resume"]) == 2
+    assert "holds no run to resume" in capsys.readouterr().err and not (tmp_path / "new").exists()
+
+
+def test_the_command_checks_every_file_before_cutting_crops(beds, tmp_path, capsys) -> None:
+    # --init of another network and --masks garbage were tracebacks, the first after every crop
+    # was cut; a missing or repeated --scenes folder was found after the others were cropped.
+    from sms3d_env.cli import main
+
+    root, _ = beds
+    (tmp_path / "garbage.pt").write_bytes(b"not a checkpoint")
+    cache, out = tmp_path / "cache", tmp_path / "out"
+    command = ["train-axis-cnn", "--out", str(out), "--cache", str(cache), "--scenes", str(root)]
+    for flags, named in (
+        (["--init", str(default_weights_path())], ("--init", default_weights_path().name, "not an axis-CNN checkpoint")),
+        (["--masks", str(tmp_path / "garbage.pt")], ("--masks", "garbage.pt")),
+        ([str(tmp_path / "missing")], ("--scenes", "missing", "manifest.json")),
+        ([f"{root}/"], ("--scenes", "given twice")),
+    ):
+        assert main([*command, *flags]) == 2
+        err = capsys.readouterr().err
+        assert all(n in err for n in named), err
+    assert not cache.exists() and not out.exists()
+    assert main(["train-axis-cnn", "--out", "", "--scenes", str(tmp_path / "missing")]) == 2
+    assert "--out must name a folder" in capsys.readouterr().err
 
 
 def test_the_command_defaults_are_the_training_config_defaults() -> None:

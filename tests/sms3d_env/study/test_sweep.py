@@ -228,3 +228,124 @@ def test_a_killed_sweep_leaves_no_worker(tmp_path, processes):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert processes.survivors(workers) == []
+
+
+def test_a_killed_ray_sweep_leaves_no_ray_process(tmp_path, processes):
+    """``kill -9`` of a sweep on Ray ends every process of its cluster at once: the raylet's agents
+    used to wait 60-105 s on the dead GCS server, and a running task kept writing parts."""
+    pytest.importorskip("ray")
+    cmd = [sys.executable, "-m", "sms3d_env.cli", "sweep", "--out", str(tmp_path / "sweep"), "--errors", "0", "10",
+           "--episodes", "40", "--num-mushrooms", "8", "--workers", "1", "--backend", "ray"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def tree() -> list[int]:
+        found, frontier = [], processes.children(proc.pid)
+        while frontier:
+            found.append(pid := frontier.pop())
+            frontier += processes.children(pid)
+        return found
+
+    def running_task(pid: int) -> bool:
+        try:
+            return open(f"/proc/{pid}/cmdline", "rb").read().startswith(b"ray::_run_and_save")
+        except OSError:
+            return False
+
+    deadline = time.monotonic() + 120
+    while not any(running_task(pid) for pid in tree()):
+        assert proc.poll() is None and time.monotonic() < deadline, "the sweep ended before its first Ray task"
+        time.sleep(0.05)
+    time.sleep(1.0)  # the watchdog notes the tree every 0.5 s
+    ray_processes = tree()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert processes.survivors(ray_processes, wait_s=5.0) == []
+
+
+def _sweep_folder(folder, picker="scripted", seeds=range(4), errors=(0.0, 10.0), size=25, variant="default"):
+    """A sweep folder with one part file of hand-made rows (what ``load_rows`` reads)."""
+    (folder / "parts").mkdir(parents=True)
+    rows = [{"variant": variant, "picker": picker, "source": "noisy", "error_deg": e, "position_error_mm": 0.0,
+             "tool": "suction", "num_mushrooms": size, "seed": s, "reachable": True, "success": (s + int(e)) % 3 > 0,
+             "failure_cause": None if (s + int(e)) % 3 else "no_seal"} for e in errors for s in seeds]
+    (folder / "parts" / "all.json").write_text(json.dumps(rows))
+    return folder
+
+
+@pytest.mark.parametrize("other, named", [
+    ({"size": 8}, "bed size 8 mushrooms"),
+    ({"seeds": range(10, 14)}, "seeds 10–13"),
+    ({"errors": (0.0, 20.0)}, "errors 0°, 20°"),
+    ({"seeds": (0, 1, 2, 5)}, "seeds 0–2, 5"),
+])
+def test_sweep_compare_refuses_sweeps_that_did_not_run_the_same_episodes(tmp_path, capsys, other, named):
+    # Side by side, other beds or seeds gave McNemar p = nan: no episode pairs.
+    first = _sweep_folder(tmp_path / "a")
+    second = _sweep_folder(tmp_path / "b", picker="policy:x", **other)
+    assert main(["sweep-compare", str(first), str(second), "--out", str(tmp_path / "cmp.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("sms3d sweep-compare: error: ") and "cannot be paired" in err
+    assert str(second) in err and str(first) in err and named in err, err
+    assert not (tmp_path / "cmp.png").exists()
+
+
+def test_sweep_compare_refuses_a_sweep_without_the_default_physics(tmp_path, capsys):
+    # It used to be left out of the table and the figure without a word.
+    first = _sweep_folder(tmp_path / "a")
+    tight = _sweep_folder(tmp_path / "tight", variant="tight_seal")
+    assert main(["sweep-compare", str(first), str(tight), "--out", str(tmp_path / "cmp.png")]) == 2
+    err = capsys.readouterr().err
+    assert f"{tight} holds no episodes of the noisy pose source with the default physics" in err
+
+
+def test_sweep_compare_labels_sweeps_of_one_name_by_their_paths(tmp_path, capsys):
+    folders = [_sweep_folder(tmp_path / parent / "run") for parent in ("x", "y", "z")]
+    assert main(["sweep-compare", *map(str, folders), "--out", str(tmp_path / "cmp.png")]) == 0
+    table = capsys.readouterr().out
+    for label in ("scripted", "scripted (y/run)", "scripted (z/run)"):
+        assert f"| {label} | 10° | 3/4 = 75.0 % |" in table, table
+    assert "nan" not in table
+    assert (tmp_path / "cmp.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("out", ["", "folder", "missing/cmp.png"])
+def test_sweep_compare_refuses_an_output_it_cannot_write_before_reading_sweeps(tmp_path, capsys, out):
+    (tmp_path / "folder").mkdir()
+    sweep = _sweep_folder(tmp_path / "a")
+    target = str(tmp_path / out) if out else out
+    assert main(["sweep-compare", str(sweep), "--out", target]) == 2
+    assert capsys.readouterr().err.startswith("sms3d sweep-compare: error: --out ")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "folder"]  # no temporary file either
+
+
+def test_sweep_refuses_an_empty_or_file_out(tmp_path, capsys, monkeypatch):
+    # An empty --out ran the sweep in the current folder.
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "file").write_text("")
+    for out in ("", "file"):
+        assert main(["sweep", "--out", out, "--errors", "0", "--episodes", "1", "--workers", "1"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("sms3d sweep: error: ") and "--out must" in err, err
+    assert [p.name for p in tmp_path.iterdir()] == ["file"]
+
+
+def test_a_resumed_sweep_refuses_a_learned_picker_whose_config_changed(tmp_path, monkeypatch):
+    """The picker's ``config.json`` sets the env it acts in: parts made with another are stale."""
+    from sms3d_env.study import sweep
+    from sms3d_env.training.actor import SHIPPED_POLICY
+
+    picker = tmp_path / "policy"
+    picker.mkdir()
+    for name in ("model.zip", "config.json"):
+        (picker / name).write_bytes((SHIPPED_POLICY.parent / name).read_bytes())
+    config = SweepConfig(errors_deg=(0.0,), episodes=1, num_mushrooms=8, picker=f"policy:{picker / 'model.zip'}")
+    out = tmp_path / "sweep"
+    (out / "parts").mkdir(parents=True)
+    (out / "sweep_config.json").write_text(json.dumps(sweep._settings(config)))
+    (out / "parts" / f"{plan_tasks(config)[0].name}.json").write_text("[]")  # the sweep's one task, done
+    assert run_sweep(config, out, progress=False) == []  # the same files: resumed
+    saved = json.loads((picker / "config.json").read_text())
+    (picker / "config.json").write_text(json.dumps({**saved, "env_options": {**saved["env_options"],
+                                                                             "end_on_dead_end": False}}))
+    with pytest.raises(ValueError, match=f"picker files changed since the parts were made: {picker / 'config.json'}"):
+        run_sweep(config, out, progress=False)

@@ -47,6 +47,19 @@ def test_a_rerun_reuses_the_demonstrations_and_the_dagger_data(bc_run):
     assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz")} == before
 
 
+def test_a_rerun_with_other_settings_is_refused_and_keeps_the_model(bc_run, capsys):
+    from generator.run_folder import RunFolderError
+
+    out, cfg, summary = bc_run
+    model = (out / "model.zip").read_bytes()
+    with pytest.raises(RunFolderError, match=r"epochs \(2 → 3\).*--overwrite"):
+        train_bc(BCConfig(**{**cfg.__dict__, "epochs": 3}), progress=False)
+    assert main(["train-policy", "--recipe", "bc", "--out", str(out), "--epochs", "3"]) == 2
+    assert "holds a run made with other settings" in capsys.readouterr().out
+    assert (out / "model.zip").read_bytes() == model
+    assert train_bc(cfg, progress=False) == summary and "is complete" in capsys.readouterr().out
+
+
 def test_eval_policy_prints_the_success_line(bc_run, capsys):
     out, _, _ = bc_run
     assert main(["eval-policy", "--model", str(out / "model.zip"), "--episodes", "2",

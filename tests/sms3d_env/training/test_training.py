@@ -471,12 +471,11 @@ def test_module_main_eval_policy(ppo_run, tmp_path, capsys):
 def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_like_its_run(tmp_path):
     """``init_model``: a checkpoint's weights and observation statistics become the new run's
     start; a checkpoint alone is rebuilt with its run's env (config.json one folder up)."""
-    import pickle
-
     import numpy as np
 
     from sms3d_env.training.actor import PolicyActor, observation_stats_path, saved_config_path
     from sms3d_env.training.envs import normalized, vec_env
+    from sms3d_env.training.model_files import ObservationStats
     from sms3d_env.training.rl import InitModelError, _build_model, _start_from
 
     first = tmp_path / "first"
@@ -485,7 +484,9 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     train_policy(cfg)
     checkpoint = first / "checkpoints" / "ppo_128_steps.zip"
     assert saved_config_path(checkpoint) == first / "config.json"
-    assert observation_stats_path(checkpoint) == first / "checkpoints" / "ppo_vecnormalize_128_steps.pkl"
+    # The statistics of the final model and of each checkpoint as arrays, none as a pickle.
+    assert (first / "obs_rms.npz").is_file() and not list(first.rglob("*.pkl"))
+    assert observation_stats_path(checkpoint) == first / "checkpoints" / "ppo_obs_rms_128_steps.npz"
     actor = PolicyActor(checkpoint)
     assert actor.env_id == "SMS3DPickTrain-v0" and actor.obs_stats is not None
 
@@ -497,8 +498,7 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
         saved = load_model(checkpoint)
         for a, b in zip(model.policy.parameters(), saved.policy.parameters(), strict=True):
             assert np.array_equal(a.detach().numpy(), b.detach().numpy())
-        with open(observation_stats_path(checkpoint), "rb") as f:
-            stats = pickle.load(f).obs_rms
+        stats = ObservationStats.load(observation_stats_path(checkpoint)).obs
         assert all(np.array_equal(env.obs_rms[k].mean, stats[k].mean) for k in stats)
 
         with pytest.raises(InitModelError, match="no saved model"):
@@ -562,15 +562,14 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
 
 
 def test_normalised_rewards_are_scaled_by_the_discounted_returns_spread(tmp_path):
-    import pickle
+    from sms3d_env.training.model_files import ObservationStats
 
     cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", n_envs=2, vec_env="dummy", flat_observation=True,
                       normalize=True, normalize_reward=True, total_steps=256, n_steps=64, batch_size=64,
                       out=str(tmp_path), **{**FAST, "checkpoint_freq": 0})
     train_policy(cfg)
-    with open(tmp_path / "vecnormalize.pkl", "rb") as f:
-        stats = pickle.load(f)
-    assert stats.norm_reward and stats.gamma == cfg.gamma and stats.ret_rms.count > 256
+    stats = ObservationStats.load(tmp_path / "obs_rms.npz")
+    assert stats.norm_reward and stats.gamma == cfg.gamma and stats.returns.count > 256
     assert json.loads((tmp_path / "config.json").read_text())["normalize_reward"] is True
     with pytest.raises(ValueError, match="normalize_reward needs normalize"):
         TrainConfig(normalize_reward=True)

@@ -82,7 +82,7 @@ def test_the_trigger_fires_where_the_expected_gain_passes_the_margin():
 def test_labels_resume_from_their_files_and_are_remade_for_other_settings(tmp_path):
     cfg = TriggerConfig(out=str(tmp_path), episodes=2, seed=14, **SMALL)
     first = collect_labels(cfg, progress=False)
-    path = tmp_path / "labels" / "episodes_14.npz"
+    path = tmp_path / "labels" / "episodes_14-15.npz"
     stamp = path.stat().st_mtime_ns
     again = collect_labels(cfg, progress=False)
     assert path.stat().st_mtime_ns == stamp  # reused, not collected again

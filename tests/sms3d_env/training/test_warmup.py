@@ -122,7 +122,7 @@ def test_the_flag_reaches_the_training_config(monkeypatch, recipe):
     from sms3d_env.training import cli
 
     seen = []
-    monkeypatch.setattr(cli, "train_policy", lambda cfg: seen.append(cfg) or {})
+    monkeypatch.setattr(cli, "train_policy", lambda cfg, overwrite: seen.append(cfg) or {})
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="cmd"))
     a = parser.parse_args(["train-policy", "--recipe", recipe, "--critic-warmup-steps", "4096"])

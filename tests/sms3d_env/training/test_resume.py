@@ -1,0 +1,170 @@
+"""Run folders of the training commands: a rerun with the same settings resumes (after a kill, from
+the latest checkpoint) or, finished, does nothing; other settings are refused before anything is
+written, unless --overwrite."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from generator.run_folder import RunFolderError
+from sms3d_env.training import TrainConfig, load_model, main, train_policy
+from sms3d_env.training.actor import checkpoint_steps
+from sms3d_env.training.trigger_rollouts import TriggerConfig, train_trigger
+
+TINY = dict(algo="ppo", total_steps=64, n_steps=64, batch_size=64, num_mushrooms=8, max_episode_steps=40,
+            eval_freq=0, checkpoint_freq=0, verbose=0, net_arch=(32, 32))
+
+
+def _rows(path) -> list[dict[str, str]]:
+    return list(csv.DictReader(path.read_text().splitlines()))
+
+
+def _steps_column(path) -> list[float]:
+    return [float(r["time/total_timesteps"]) for r in _rows(path) if r.get("time/total_timesteps")]
+
+
+def test_a_killed_training_resumes_from_its_latest_checkpoint_and_says_so(tmp_path):
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "sms3d_env.training", "train-policy", "--steps", "1024", "--num-mushrooms", "8",
+               "--checkpoint-freq", "128", "--eval-freq", "256", "--eval-episodes", "1", "--vec-env", "dummy",
+               "--out", str(out)]
+    log = (tmp_path / "first.log").open("w")
+    first = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+    try:
+        deadline = time.monotonic() + 300
+        while not (out / "checkpoints" / "ppo_256_steps.zip").is_file():
+            assert first.poll() is None, (tmp_path / "first.log").read_text()[-3000:]
+            assert time.monotonic() < deadline, "no checkpoint at 256 steps within 300 s"
+            time.sleep(0.05)
+    finally:
+        first.kill()  # SIGKILL: no handler runs
+        first.wait()
+    resumed_at = max(checkpoint_steps(p) for p in (out / "checkpoints").glob("ppo_*_steps.zip"))
+    kept = [r for r in _rows(out / "progress.csv") if float(r["time/total_timesteps"]) <= resumed_at]
+    assert kept, "the killed run logged its evaluation at 256 steps"
+    monitor_before = (out / "monitor" / "0.monitor.csv").read_text()
+
+    second = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert second.returncode == 0, second.stdout[-3000:] + second.stderr[-3000:]
+    assert f"resuming {out} from step {resumed_at} of 1024" in second.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["resumed_from_step"] == resumed_at and summary["steps"] >= 1024
+    assert type(load_model(out / "model.zip")).__name__ == "PPO"
+    # The earlier rows (under a header the resumed run's new columns extend), then the resumed run's.
+    assert [{k: r[k] for k in kept[0]} for r in _rows(out / "progress.csv")[:len(kept)]] == kept
+    steps = _steps_column(out / "progress.csv")
+    assert steps == sorted(steps) and steps[-1] >= 1024
+    assert (out / "monitor" / "0.monitor.csv").read_text().startswith(monitor_before)
+
+    again = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0 and "is complete" in again.stdout
+    assert json.loads((out / "summary.json").read_text()) == summary
+
+
+def test_a_rerun_with_other_settings_is_refused_and_leaves_the_run_usable(tmp_path, capsys):
+    out = tmp_path / "run"
+    cfg = TrainConfig(out=str(out), **TINY)
+    train_policy(cfg)
+    files = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    assert main(["train-policy", "--out", str(out), "--num-mushrooms", "101"]) == 2
+    assert "TrainConfig.num_mushrooms" in capsys.readouterr().out
+    with pytest.raises(RunFolderError, match=r"num_mushrooms \(8 → 9\).*--overwrite"):
+        train_policy(TrainConfig(**{**cfg.__dict__, "num_mushrooms": 9}))
+    assert main(["train-policy", "--out", str(out), "--steps", "64", "--num-mushrooms", "8"]) == 2
+    assert "holds a run made with other settings" in capsys.readouterr().out
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files
+    assert main(["eval-policy", "--model", str(out / "model.zip"), "--episodes", "1"]) == 0
+
+    # The same settings: a finished run does nothing.
+    capsys.readouterr()
+    assert train_policy(cfg) == json.loads((out / "summary.json").read_text())
+    assert "is complete" in capsys.readouterr().out
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files
+    # --overwrite starts anew.
+    train_policy(TrainConfig(**{**cfg.__dict__, "seed": 1}), overwrite=True)
+    assert json.loads((out / "config.json").read_text())["seed"] == 1
+
+
+def test_nothing_is_written_for_a_bed_size_the_generator_refuses(tmp_path, capsys):
+    assert main(["train-policy", "--out", str(tmp_path / "new"), "--num-mushrooms", "101"]) == 2
+    assert "TrainConfig.num_mushrooms" in capsys.readouterr().out
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_resumed_run_without_a_checkpoint_starts_at_step_zero_and_says_so(tmp_path, capsys):
+    out = tmp_path / "run"
+    cfg = TrainConfig(out=str(out), **TINY)
+    train_policy(cfg)
+    (out / "summary.json").unlink()  # as if killed before it finished
+    capsys.readouterr()
+    train_policy(cfg)
+    assert f"resuming {out} from step 0 of 64 (no complete checkpoint yet)" in capsys.readouterr().out
+    assert _steps_column(out / "progress.csv") == [64.0]
+
+
+def test_a_sac_run_resumes_with_its_replay_buffer_and_observation_statistics(tmp_path, capsys):
+    from stable_baselines3.common.save_util import load_from_pkl
+
+    from sms3d_env.training.model_files import ObservationStats
+
+    out = tmp_path / "run"
+    cfg = TrainConfig(out=str(out), **{**TINY, "algo": "sac", "total_steps": 200, "learning_starts": 50,
+                                       "batch_size": 32, "checkpoint_freq": 100, "normalize": True})
+    train_policy(cfg)
+    at_100 = ObservationStats.load(out / "checkpoints" / "sac_obs_rms_100_steps.npz")
+    for name in ("summary.json", "model.zip", "obs_rms.npz", "checkpoints/sac_200_steps.zip"):
+        (out / name).unlink()  # as if killed after the checkpoint at 100 steps
+    capsys.readouterr()
+    assert train_policy(cfg)["steps"] == 200
+    assert f"resuming {out} from step 100 of 200" in capsys.readouterr().out
+    # SB3 stores a step's transition after the callbacks ran: 99 at the checkpoint of 100, and
+    # 99 more since; a buffer not restored would hold 99.
+    assert load_from_pkl(out / "checkpoints" / "sac_replay_buffer_200_steps.pkl").size() == 198
+    # The statistics went on from the checkpoint's: the resumed run's reset and 100 steps more.
+    count = ObservationStats.load(out / "obs_rms.npz").obs["tool_pose"].count
+    assert count == pytest.approx(at_100.obs["tool_pose"].count + 101)
+
+
+SMALL = dict(num_mushrooms=8, pose_error_range_deg=(30.0, 30.0), candidates=4, epochs=2)
+
+
+def test_a_trigger_run_grown_by_more_episodes_labels_the_missing_ones_and_fits_on_all(tmp_path, capsys):
+    from generator.files import read_npz_made_with
+
+    cfg = TriggerConfig(out=str(tmp_path), episodes=2, seed=14, **SMALL)
+    train_trigger(cfg, progress=False)
+    first_chunk = tmp_path / "labels" / "episodes_14-15.npz"
+    stamp = first_chunk.stat().st_mtime_ns
+    capsys.readouterr()
+    grown = TriggerConfig(**{**cfg.__dict__, "episodes": 3})
+    summary = train_trigger(grown, progress=False)
+    assert f"resuming {tmp_path}: 2 of 3 episodes labelled" in capsys.readouterr().out
+    assert first_chunk.stat().st_mtime_ns == stamp
+    chunks = sorted((tmp_path / "labels").glob("*.npz"))
+    assert [p.name for p in chunks] == ["episodes_14-15.npz", "episodes_16-16.npz"]
+    episodes = np.concatenate([read_npz_made_with(p, grown.label_settings(int(a), int(b) + 1))["episode"]
+                               for p in chunks for a, b in [re.findall(r"\d+", p.name)]])
+    assert summary["episodes"] == 3 and set(episodes) <= {14, 15, 16}
+    assert summary["labelled_states"] == len(episodes) and 16 in episodes
+    assert json.loads((tmp_path / "summary.json").read_text()) == summary
+
+    model = (tmp_path / "model.zip").read_bytes()
+    assert train_trigger(grown, progress=False) == summary and "is complete" in capsys.readouterr().out
+    with pytest.raises(RunFolderError, match=r"margin \(0.15 → 0.3\)"):
+        train_trigger(TriggerConfig(**{**grown.__dict__, "margin": 0.3}), progress=False)
+    assert (tmp_path / "model.zip").read_bytes() == model
+
+
+@pytest.mark.parametrize("out", ["", " "])
+def test_train_trigger_refuses_an_empty_out(out, capsys):
+    assert main(["train-trigger", "--out", out, "--episodes", "1"]) == 2
+    assert "--out must name a folder" in capsys.readouterr().out
