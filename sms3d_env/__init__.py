@@ -1,5 +1,6 @@
-"""Gymnasium environments for robotic mushroom picking (``SMS3DPick-v0``, ``SMS3DPickSparse-v0``,
-``SMS3DPickTrain-v0``: the learnable training options)."""
+"""Gymnasium environments for robotic mushroom picking (``SMS3DPick-v1``, ``SMS3DPickTrain-v1``:
+the learnable training options; the superseded ``-v0`` ids with the Jaco whose links partly
+collide with nothing)."""
 
 import os
 
@@ -23,6 +24,7 @@ _EXPORTS = {
     "NoisyPose": "pose_sources", "OraclePose": "pose_sources", "PoseEstimate": "pose_sources",
     "PoseSource": "pose_sources", "UniformNoisyPose": "pose_sources", "make_pose_source": "pose_sources",
     "Tool": "tools", "TOOLS": "robot", "RobotConfig": "robot",
+    "GantryConfig": "gantry", "ROBOTS": "robots", "make_robot": "robots",
     "HandPicker": "pickers.scripted", "ScriptedPicker": "pickers.scripted", "run_episode": "pickers.episode",
 }  # fmt: skip
 
@@ -33,9 +35,15 @@ __all__ = sorted(_EXPORTS)
 TRAIN_OPTIONS = {"reward_type": "staged", "suction_mode": "latched", "end_on_dead_end": True,
                  "task_obs": True}
 
+#: What SMS3DPick-v1 changes from v0 (see ``SMS3DPickEnv``'s version history): an honest robot,
+#: every mushroom colliding.
+V1_OPTIONS = {"robot": "gantry", "free_radius": None}
+
 for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
                  ("SMS3DPickSparse-v0", {"reward_type": "sparse"}),
-                 ("SMS3DPickTrain-v0", TRAIN_OPTIONS)):
+                 ("SMS3DPickTrain-v0", TRAIN_OPTIONS),
+                 ("SMS3DPick-v1", {"reward_type": "dense", **V1_OPTIONS}),
+                 ("SMS3DPickTrain-v1", {**TRAIN_OPTIONS, **V1_OPTIONS})):
     if _id not in registry:
         register(id=_id, entry_point="sms3d_env.pick_env:SMS3DPickEnv", max_episode_steps=250,
                  kwargs=_kw)

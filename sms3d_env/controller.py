@@ -16,7 +16,7 @@ import mink
 import mujoco
 import numpy as np
 
-from sms3d_env.robot import ARM_JOINTS, PREFIX, TOOL_SITE, RobotConfig, arm_only_model
+from sms3d_env.robot import TOOL_SITE, RobotSpec, arm_only_model
 
 
 @dataclass(frozen=True)
@@ -26,8 +26,13 @@ class ControllerConfig:
     Attributes:
         max_linear_speed: tool speed at |action| = 1 (m/s). ASSUMPTION: a safe speed near produce.
         max_angular_speed: tool angular speed at |action| = 1 (rad/s). ASSUMPTION.
-        max_joint_speed: per-joint velocity limit in the IK (rad/s); Jaco's rating is ~0.8-1.0.
+        max_joint_speed: per-joint velocity limit of revolute joints in the IK (rad/s); Jaco's
+            rating is ~0.8-1.0.
+        max_slide_speed: the same for prismatic joints (the gantry's rails and lift, m/s).
+            ASSUMPTION: 0.5 m/s, moderate for belt-driven gantries.
         max_lead: largest gap between commanded and measured joint angle (rad).
+        max_slide_lead: the same for prismatic joints (m). ASSUMPTION: 3 mm, so that the
+            gantry's lift (6000 N/m) presses at most 18 N, below the 25 N bruising force.
         position_cost, orientation_cost, posture_cost: mink task weights.
         damping: Levenberg-Marquardt damping of the IK QP.
     """
@@ -35,14 +40,17 @@ class ControllerConfig:
     max_linear_speed: float = 0.12
     max_angular_speed: float = 0.8
     max_joint_speed: float = 1.0
+    max_slide_speed: float = 0.5
     max_lead: float = 0.03
+    max_slide_lead: float = 0.003
     position_cost: float = 1.0
     orientation_cost: float = 0.3
     posture_cost: float = 1e-2
     damping: float = 1e-4
 
     def __post_init__(self) -> None:
-        for name in ("max_linear_speed", "max_angular_speed", "max_joint_speed", "max_lead"):
+        for name in ("max_linear_speed", "max_angular_speed", "max_joint_speed", "max_slide_speed",
+                     "max_lead", "max_slide_lead"):
             v = getattr(self, name)
             if not np.isfinite(v) or v <= 0:
                 raise ValueError(f"ControllerConfig.{name} must be > 0, got {v!r}")
@@ -56,7 +64,7 @@ class ArmBoxLimit(mink.Limit):
     rebuilt and stacked their matrices every step, a third of the controller's time.
     """
 
-    def __init__(self, model: mujoco.MjModel, joints: list[str], max_speed: float,
+    def __init__(self, model: mujoco.MjModel, joints: list[str], max_speed: np.ndarray,
                  gain: float = 0.95) -> None:
         ids = [model.joint(j).id for j in joints]
         self.qadr = model.jnt_qposadr[ids]
@@ -65,7 +73,7 @@ class ArmBoxLimit(mink.Limit):
         limited = model.jnt_limited[ids].astype(bool)
         self.lower = np.where(limited, model.jnt_range[ids, 0], -np.inf)
         self.upper = np.where(limited, model.jnt_range[ids, 1], np.inf)
-        self.max_speed, self.gain = max_speed, gain
+        self.max_speed, self.gain = np.asarray(max_speed, float), gain
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         q = configuration.data.qpos[self.qadr]
@@ -78,22 +86,26 @@ class ArmBoxLimit(mink.Limit):
 class IKController:
     """Turns world-frame tool twists into commanded arm joint angles with mink."""
 
-    def __init__(self, robot: RobotConfig, cfg: ControllerConfig, dt: float) -> None:
+    def __init__(self, robot: RobotSpec, cfg: ControllerConfig, dt: float) -> None:
         self.cfg, self.dt = cfg, dt
         self.model = arm_only_model(robot)
         self.configuration = mink.Configuration(self.model)
-        self.site = PREFIX + TOOL_SITE
+        self.site = robot.prefix + TOOL_SITE
         self.site_id = self.model.site(self.site).id
-        self.arm_qadr = np.array([self.model.jnt_qposadr[self.model.joint(PREFIX + j).id]
-                                  for j in ARM_JOINTS])
+        joints = [robot.prefix + j for j in robot.joints]
+        ids = [self.model.joint(j).id for j in joints]
+        self.arm_qadr = self.model.jnt_qposadr[ids]
+        slide = self.model.jnt_type[ids] == mujoco.mjtJoint.mjJNT_SLIDE
+        self.max_lead = np.where(slide, cfg.max_slide_lead, cfg.max_lead)
         self.frame_task = mink.FrameTask(self.site, "site", position_cost=cfg.position_cost,
                                          orientation_cost=cfg.orientation_cost, lm_damping=1e-3)
-        # No posture cost on joint 6 (the tool roll): the picker leaves the roll free.
+        # No posture cost on the last joint (the tool roll): the picker leaves the roll free.
         cost = np.full(self.model.nv, cfg.posture_cost)
-        cost[self.model.jnt_dofadr[self.model.joint(PREFIX + ARM_JOINTS[-1]).id]] = 0.0
+        cost[self.model.jnt_dofadr[ids[-1]]] = 0.0
         self.posture_task = mink.PostureTask(self.model, cost=cost)
         self.tasks = [self.frame_task, self.posture_task]
-        self.limits = [ArmBoxLimit(self.model, [PREFIX + j for j in ARM_JOINTS], cfg.max_joint_speed)]
+        speeds = np.where(slide, cfg.max_slide_speed, cfg.max_joint_speed)
+        self.limits = [ArmBoxLimit(self.model, joints, speeds)]
 
     def reset(self, q_arm: np.ndarray, q_home: np.ndarray | None = None) -> None:
         """Set the commanded configuration (and the posture target) to ``q_arm``."""
@@ -123,8 +135,8 @@ class IKController:
         """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period."""
         q = self.configuration.q
         gap = q[self.arm_qadr] - q_measured
-        if np.abs(gap).max() > self.cfg.max_lead + 1e-8:
-            q[self.arm_qadr] = q_measured + gap.clip(-self.cfg.max_lead, self.cfg.max_lead)
+        if (np.abs(gap) > self.max_lead + 1e-8).any():
+            q[self.arm_qadr] = q_measured + gap.clip(-self.max_lead, self.max_lead)
             self.configuration.update(q)
         # Target = the commanded tool pose moved by the twist, the rotation composed in
         # quaternions (no rotation-matrix round trip).

@@ -1,5 +1,5 @@
-"""``SMS3DPick-v0``: pick one mushroom from a synthetic bed with a Kinova Jaco, by a suction
-tool (default) or the Jaco 3-finger hand.
+"""``SMS3DPick-v1``: pick one mushroom from a synthetic bed with a Cartesian gantry harvester or
+a Kinova Jaco, by a suction tool (default) or the Jaco 3-finger hand.
 
 The env holds the gym API only: spaces, reset/step, observation, reward assembly and rendering.
 The beds come from :mod:`sms3d_env.scene_source`; the world (scene + robot model and its id
@@ -35,7 +35,8 @@ from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
 from sms3d_env.pose_sources import OraclePose, PoseSource, make_pose_source
 from sms3d_env.rewards import RewardState, compute_reward, reward_terms
-from sms3d_env.robot import RobotConfig
+from sms3d_env.robot import RobotConfig, RobotSpec
+from sms3d_env.robots import make_robot
 from sms3d_env.scene_source import SceneSource
 from sms3d_env.targets import Reachability, select_target
 from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
@@ -105,7 +106,22 @@ class SMS3DPickEnv(gym.Env):
     ``reachable``, ``gripped``, ``gripped_target``, ``target_detached``, ``bruised``,
     ``neighbours_disturbed``, ``lift``, ``unstable_simulation`` (the picking model's
     ``evaluate()``), ``start`` (``"home"``, or ``"pregrasp"`` for a ``pregrasp_start`` reset),
-    plus the staged reward's terms.
+    ``time_s`` (simulated seconds since reset; at success, the pick's cycle time), plus the
+    staged reward's terms. ``failure_cause="not_reached"``: the tool never came within 1 cm of
+    the target's true cap top (the approach stopped short); ``"no_seal"``: it did, and no seal
+    formed.
+
+    ## Version history
+    - v1: the robot is physically honest. A Cartesian gantry harvester (``robot="gantry"``, the
+      default) or a Jaco hanging above the bed (``robot="jaco"``), every link of either
+      colliding with the soil and with every mushroom; every mushroom is free and rooted
+      (``free_radius=None``), so any link that touches a cap is judged by the same bruise and
+      disturbed-neighbour rules as the tool. ``info`` gains ``time_s``; the failure cause
+      ``not_reached`` separates approaches that stopped short from seals that failed.
+    - v0: the Jaco beside the bed below the soil line; its base, shoulder, upper arm, forearm and
+      first wrist link collide with nothing, and only the mushrooms within 10 cm of the target
+      collide with anything (``free_radius=0.10``). Superseded by v1; its measurements stay in the
+      results history.
 
     Args:
         render_mode: ``"rgb_array"`` or ``"depth_array"`` (metric depth in metres).
@@ -120,7 +136,12 @@ class SMS3DPickEnv(gym.Env):
         target_rule: ``"tallest"``, ``"largest"``, ``"index"`` (with ``target_index``),
             ``"random"``; ``options={"target": i}`` overrides it for one reset.
         reward_type: ``"dense"``, ``"sparse"`` or ``"staged"``.
-        physics, robot, controller: the picking model's numbers, the arm's mount and tool, the IK.
+        physics, controller: the picking model's numbers, the IK's speeds and weights.
+        robot: ``"gantry"`` (``SMS3DPick-v1``'s default: the Cartesian harvester of
+            :mod:`sms3d_env.gantry`) or ``"jaco"`` (the Kinova Jaco hanging above the bed), or a
+            ``GantryConfig`` / ``RobotConfig``; every link of either collides with the soil and
+            the mushrooms. ``None``: ``SMS3DPick-v0``'s Jaco, mounted beside the bed with five
+            links that collide with nothing.
         control_dt, substeps: control period (s) and physics steps per control step.
         image_obs, image_size, camera: RGB-D observations of ``image_size`` from ``camera``.
         render_size: ``render()``'s (height, width).
@@ -193,7 +214,7 @@ class SMS3DPickEnv(gym.Env):
         target_index: int = 0,
         reward_type: str = "dense",
         physics: PickPhysicsParams | None = None,
-        robot: RobotConfig | None = None,
+        robot: str | RobotSpec | None = None,
         controller: ControllerConfig | None = None,
         control_dt: float = 0.04,
         substeps: int = 20,
@@ -216,7 +237,8 @@ class SMS3DPickEnv(gym.Env):
         reward_pose: str = "estimate",
         success_payoff: str = "time_left",
     ) -> None:
-        self.robot_cfg = robot or RobotConfig()
+        # None: v0's Jaco (five of its links collide with nothing); SMS3DPick-v1 passes a name.
+        self.robot_cfg = RobotConfig() if robot is None else make_robot(robot)
         check_env_args(render_mode=render_mode, reward_type=reward_type, control_dt=control_dt,
                        substeps=substeps, tool=tool or self.robot_cfg.tool, suction_mode=suction_mode,
                        horizon=horizon, scene_pool=scene_pool, pool_seed=pool_seed, scenes=scenes,

@@ -35,8 +35,11 @@ from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.tools import Tool, make_tool
 from sms3d_env.world import World
 
-FAILURE_CAUSES = ("no_seal", "grip_lost", "not_detached", "bruised", "neighbour_disturbed",
+FAILURE_CAUSES = ("not_reached", "no_seal", "grip_lost", "not_detached", "bruised", "neighbour_disturbed",
                   "unreachable", "timeout", "unstable_simulation")
+#: The tool "reached" the target once its site came this close to the true cap top (m): an
+#: episode that never did fails as ``not_reached`` (the approach stopped short), not ``no_seal``.
+REACHED_DISTANCE = 0.01
 _EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
 
 
@@ -61,6 +64,7 @@ class EpisodeState:
     disturbed: set[int] = field(default_factory=set)
     unstable: bool = False
     max_lift: float = 0.0
+    closest_approach: float = np.inf  # the tool site's least distance to the target's cap top (m)
     root_util: float = 0.0  # target root load / capacity, largest in this control step (reward only)
     seal_step: int = -1  # control step at which the current seal formed (-1: none)
     seal_tool_x: np.ndarray | None = None  # tool x axis (world) when it formed
@@ -128,6 +132,8 @@ class PickingModel:
         ep, w, d = self.state, self.world, self.world.data
         self.tool.after_step()
         ep.steps += 1
+        gap = d.site_xpos[w.tool_site] - d.site_xpos[w.cap_top_sites[ep.target]]
+        ep.closest_approach = min(ep.closest_approach, float(np.sqrt(gap @ gap)))
         # Only mushrooms with a free joint can move (the others are static bodies).
         free = w.free_ids
         moved = d.xpos[w.body_ids[free]] - self.init_xpos[free]
@@ -253,7 +259,9 @@ class PickingModel:
         if ep.grip_lost:
             return "grip_lost"
         if not ep.ever_gripped_target:
-            return "neighbour_disturbed" if ep.disturbed else "no_seal"
+            if ep.disturbed:
+                return "neighbour_disturbed"
+            return "no_seal" if ep.closest_approach <= REACHED_DISTANCE else "not_reached"
         if not ep.target_detached:
             return "not_detached"
         if ep.disturbed:

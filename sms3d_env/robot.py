@@ -1,17 +1,18 @@
-"""Robot assembly: the Kinova Jaco arm (dm_control's bundled model) with a suction tool or the
-Jaco 3-finger hand.
+"""Robot assembly: the Kinova Jaco arm (dm_control's bundled model) or the Cartesian gantry
+harvester (:mod:`sms3d_env.gantry`), with a suction tool or the Jaco 3-finger hand.
 
-The arm (and the hand) are loaded from the dm_control wheel (BSD-3, see ``assets/NOTICE.txt``),
+The Jaco (and the hand) are loaded from the dm_control wheel (BSD-3, see ``assets/NOTICE.txt``),
 given gravity compensation and joint position actuators, fitted with a tool, and attached to a
 scene ``MjSpec`` through a frame at the mount pose. Every name in the assembled model carries the
-``jaco/`` prefix. Actuators: the six arm joints first, then (hand) the three fingers.
+robot's prefix (``jaco/``, ``gantry/``). Actuators: the six arm joints first, then (hand) the
+three fingers.
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import ClassVar, Literal, Protocol
 
 import mujoco
 import numpy as np
@@ -26,6 +27,9 @@ CUP_BODY = "cup"
 CUP_GEOM = "cup_face"
 Tool = Literal["suction", "hand"]
 TOOLS: tuple[str, ...] = ("suction", "hand")
+#: The suction tool's frame on the Jaco's last link (its -z is the approach axis); the hand's
+#: own frame is the link's.
+JACO_TOOL_QUAT = (0.0, 0.70710678, 0.70710678, 0.0)
 # The hand's finger joints (one per finger; the distal segment is rigid) and, per finger, the
 # bodies whose geoms touch an object.
 FINGER_JOINTS: tuple[str, ...] = tuple(f"hand_finger_{i}" for i in range(1, 4))
@@ -36,18 +40,43 @@ FINGER_BODIES: tuple[tuple[str, str], ...] = tuple(
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 4
 # Tool geoms also carry bit 8, the only bit the soil accepts, and so do the links in
 # ``COLLIDING_LINKS`` (wrist 2 and the hand): they collide with the soil and with mushrooms, never
-# with each other or the tool (no robot geom accepts bits 2 or 8). KNOWN SIMPLIFICATION: the base,
-# shoulder, upper arm, forearm (b_3) and wrist 1 (b_4) collide with nothing. From the low mount
-# that the Jaco's joint limits need for tool-down reach, the forearm passes through the soil at the
-# bed's near edge in every episode, and wrist 1 (a 3.5 cm ring 7-12 cm beside the tool axis)
-# sweeps through neighbouring caps during about a quarter of the oracle picks (oracle success
-# 97.5 -> 72.5 % with it colliding, mostly bruised caps). A higher mount or a longer tube is the fix.
+# with each other or the tool (no robot geom accepts bits 2 or 8). With ``all_links_collide=False``
+# (SMS3DPick-v0) the base, shoulder, upper arm, forearm (b_3) and wrist 1 (b_4) collide with
+# nothing: from the low mount that the Jaco's joint limits need for tool-down reach, the forearm
+# passes through the soil at the bed's near edge in every episode, and wrist 1 (a 3.5 cm ring
+# 7-12 cm beside the tool axis) sweeps through neighbouring caps during about a quarter of the
+# oracle picks (oracle success 97.5 -> 72.5 % with it colliding, mostly bruised caps).
 TOOL_CONTYPE = ROBOT_CONTYPE | 8
 LINK_CONTYPE, LINK_CONAFFINITY = 0, 0
 COLLIDING_LINKS = ("b_5", "b_6")
 # In-limits home posture (rad): the cup 20 cm above the patch centre, pointing down (solved once
 # by least squares for the default mount).
 HOME_Q = np.array([-0.205, 1.4551, 1.4696, -2.8701, -0.0164, -0.0577])
+
+
+class RobotSpec(Protocol):
+    """What the world, the controller and the env read of a robot's configuration
+    (``RobotConfig``: the Jaco; ``sms3d_env.gantry.GantryConfig``: the gantry)."""
+
+    name: ClassVar[str]
+    prefix: ClassVar[str]  # of every name the robot adds to the world
+    joints: ClassVar[tuple[str, ...]]  # the six joints the controller drives, actuators in this order
+    mount_pos: tuple[float, float, float]
+    mount_yaw_deg: float
+    mount_roll_deg: float
+    tool: Tool
+    cup_radius: float
+    tube_length: float
+    finger_kp: float
+    finger_force: float
+    finger_damping: float
+    finger_armature: float
+    home_q: tuple[float, ...]
+
+    def build_spec(self) -> mujoco.MjSpec:
+        """The robot with its tool, actuators and wrist sensor, unprefixed, its base the
+        worldbody's first body."""
+        ...
 
 
 def kinova_dir() -> str:
@@ -67,6 +96,7 @@ class RobotConfig:
             with the tool pointing down (``targets.select_target`` flags each target's reach in
             ``info["reachable"]``; the study counts only reachable targets).
         mount_yaw_deg: base rotation about world z.
+        mount_roll_deg: base rotation about its own x after the yaw (180: hanging upside down).
         tool: ``"suction"`` (default) or ``"hand"`` (the Jaco 3-finger hand on finger position
             actuators).
         cup_radius: suction cup radius (m), 10 mm as in docs/physics.md (20 mm cup).
@@ -82,8 +112,13 @@ class RobotConfig:
             finger in ~6 s and hit a cap like a 1.4 kg mass: now ~2.4 rad/s, 0.3 kg at the tip.
     """
 
+    name: ClassVar[str] = "jaco"
+    prefix: ClassVar[str] = PREFIX
+    joints: ClassVar[tuple[str, ...]] = ARM_JOINTS
+
     mount_pos: tuple[float, float, float] = (-0.40, 0.0, -0.25)
     mount_yaw_deg: float = 0.0
+    mount_roll_deg: float = 0.0
     tool: Tool = "suction"
     cup_radius: float = 0.010
     tube_length: float = 0.09
@@ -96,19 +131,30 @@ class RobotConfig:
     finger_damping: float = 0.1
     finger_armature: float = 0.001
     home_q: tuple[float, ...] = field(default=tuple(HOME_Q))
+    all_links_collide: bool = False
 
     def __post_init__(self) -> None:
-        if self.tool not in TOOLS:
-            raise ValueError(f"RobotConfig.tool must be one of {TOOLS}, got {self.tool!r}")
-        if not 0.003 <= self.cup_radius <= 0.05:
-            raise ValueError(f"RobotConfig.cup_radius must be in [3, 50] mm, got {self.cup_radius!r}")
+        check_tool_fields(self)
         if len(self.home_q) != 6:
-            raise ValueError("RobotConfig.home_q must have 6 entries")
+            raise ValueError(f"{type(self).__name__}.home_q must have 6 entries")
+
+    def build_spec(self) -> mujoco.MjSpec:
+        return build_arm_spec(self)
 
 
-def _add_suction_tool(b6: mujoco.MjsBody, cfg: RobotConfig) -> None:
-    """A flange, a tube and a compliant cup along the hand's approach axis (hand frame -z)."""
-    tool = b6.add_body(name="tool", quat=[0.0, 0.70710678, 0.70710678, 0.0])
+def check_tool_fields(cfg: RobotSpec) -> None:
+    """The tool fields every robot configuration shares (``ValueError`` naming the field)."""
+    name = type(cfg).__name__
+    if cfg.tool not in TOOLS:
+        raise ValueError(f"{name}.tool must be one of {TOOLS}, got {cfg.tool!r}")
+    if not 0.003 <= cfg.cup_radius <= 0.05:
+        raise ValueError(f"{name}.cup_radius must be in [3, 50] mm, got {cfg.cup_radius!r}")
+
+
+def _add_suction_tool(parent: mujoco.MjsBody, cfg: RobotSpec,
+                      tool_quat: tuple[float, ...]) -> None:
+    """A flange, a tube and a compliant cup along the tool frame's -z (``tool_quat`` on ``parent``)."""
+    tool = parent.add_body(name="tool", quat=list(tool_quat))
     kw = dict(contype=TOOL_CONTYPE, conaffinity=ROBOT_CONAFFINITY)
     tool.add_geom(name="flange", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.03, 0.008, 0],
                   pos=[0, 0, -0.008], mass=0.08, rgba=[0.7, 0.7, 0.7, 1], **kw)
@@ -136,15 +182,21 @@ def _add_wrist_sensor(spec: mujoco.MjSpec, tool_root: mujoco.MjsBody) -> None:
         spec.add_sensor(name=name, type=kind, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=WRIST_SITE)
 
 
-def _add_hand_tool(b6: mujoco.MjsBody, spec: mujoco.MjSpec, cfg: RobotConfig) -> None:
+def _add_hand_tool(parent: mujoco.MjsBody, spec: mujoco.MjSpec, cfg: RobotSpec,
+                   tool_quat: tuple[float, ...]) -> None:
     """The Jaco 3-finger hand: palm and fingers collide like the suction tool (soil, mushrooms;
-    not the arm), each finger joint on a position actuator over its full range."""
+    not the arm), each finger joint on a position actuator over its full range. Its frame is
+    placed so that its approach axis is the suction tool's for the same ``tool_quat``."""
     hand = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_hand.xml"))
     for g in hand.geoms:
         g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
     for j in hand.joints:
         j.damping[0], j.armature, j.frictionloss = cfg.finger_damping, cfg.finger_armature, 0.01
-    frame = b6.add_frame()
+    hand_quat = np.empty(4)
+    jaco_tool_inverse = np.empty(4)
+    mujoco.mju_negQuat(jaco_tool_inverse, np.asarray(JACO_TOOL_QUAT))
+    mujoco.mju_mulQuat(hand_quat, np.asarray(tool_quat, float), jaco_tool_inverse)
+    frame = parent.add_frame(quat=list(hand_quat))
     frame.attach_body(hand.body("hand"), "hand_", "")
     grip = spec.site("hand_gripsite")
     palm = spec.body("hand_hand")
@@ -166,11 +218,11 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
     spec = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_arm.xml"))
     for name in ("b_1", "b_2", "b_3", "b_4", "b_5", "b_6"):
         spec.body(name).gravcomp = 1.0
+    colliding = {b.name for b in spec.bodies} if cfg.all_links_collide else set(COLLIDING_LINKS)
     for g in spec.geoms:
-        g.contype, g.conaffinity = LINK_CONTYPE, LINK_CONAFFINITY
-    for name in COLLIDING_LINKS:
-        for g in spec.body(name).geoms:
-            g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
+        collides = g.parent.name in colliding
+        g.contype = TOOL_CONTYPE if collides else LINK_CONTYPE
+        g.conaffinity = ROBOT_CONAFFINITY if collides else LINK_CONAFFINITY
     for i, jname in enumerate(ARM_JOINTS):
         large = i < 3
         act = spec.add_actuator(name=f"act_{jname}", target=jname,
@@ -179,27 +231,35 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
         f = cfg.force_large if large else cfg.force_small
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.forcerange = [-f, f]
-    b6 = spec.body("b_6")
-    if cfg.tool == "suction":
-        _add_suction_tool(b6, cfg)
-        _add_wrist_sensor(spec, spec.body("tool"))
-    else:
-        _add_hand_tool(b6, spec, cfg)
-        _add_wrist_sensor(spec, spec.body("hand_hand"))
+    mount_tool(spec, spec.body("b_6"), cfg, JACO_TOOL_QUAT)
     return spec
 
 
-def attach_robot(scene: mujoco.MjSpec, cfg: RobotConfig) -> mujoco.MjsFrame:
-    """Attach the arm to ``scene`` at the mount pose; names gain the ``jaco/`` prefix."""
-    arm = build_arm_spec(cfg)
-    yaw = np.deg2rad(cfg.mount_yaw_deg)
-    frame = scene.worldbody.add_frame(pos=list(cfg.mount_pos),
-                                      quat=[np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
-    frame.attach_body(arm.body("b_base"), PREFIX, "")
+def mount_tool(spec: mujoco.MjSpec, parent: mujoco.MjsBody, cfg: RobotSpec,
+               tool_quat: tuple[float, ...]) -> None:
+    """``cfg.tool`` on ``parent`` (its approach axis the -z of ``tool_quat`` there), with the
+    wrist force/torque sensor at its root."""
+    if cfg.tool == "suction":
+        _add_suction_tool(parent, cfg, tool_quat)
+        _add_wrist_sensor(spec, spec.body("tool"))
+    else:
+        _add_hand_tool(parent, spec, cfg, tool_quat)
+        _add_wrist_sensor(spec, spec.body("hand_hand"))
+
+
+def attach_robot(scene: mujoco.MjSpec, cfg: RobotSpec) -> mujoco.MjsFrame:
+    """Attach the robot to ``scene`` at its mount pose; names gain the robot's prefix."""
+    arm = cfg.build_spec()
+    yaw, roll = np.deg2rad(cfg.mount_yaw_deg), np.deg2rad(cfg.mount_roll_deg)
+    quat = np.empty(4)
+    mujoco.mju_mulQuat(quat, np.array([np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)]),
+                       np.array([np.cos(roll / 2), np.sin(roll / 2), 0, 0]))
+    frame = scene.worldbody.add_frame(pos=list(cfg.mount_pos), quat=quat.tolist())
+    frame.attach_body(arm.worldbody.first_body(), cfg.prefix, "")
     return frame
 
 
-def arm_only_model(cfg: RobotConfig) -> mujoco.MjModel:
+def arm_only_model(cfg: RobotSpec) -> mujoco.MjModel:
     """The arm alone at its mount pose (used by the IK: 6 DoF instead of the scene's hundreds)."""
     world = mujoco.MjSpec()
     attach_robot(world, cfg)

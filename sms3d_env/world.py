@@ -18,14 +18,12 @@ import numpy as np
 
 from sms3d_env import physics as ph
 from sms3d_env.robot import (
-    ARM_JOINTS,
     CUP_BODY,
     CUP_GEOM,
-    PREFIX,
     TOOL_SITE,
     WRIST_FORCE,
     WRIST_TORQUE,
-    RobotConfig,
+    RobotSpec,
     attach_robot,
 )
 from sms3d_env.tools.hand import add_stem_sockets
@@ -42,6 +40,7 @@ class World:
         model, data: MuJoCo model and data.
         scene: the ``generator.Scene``.
         tool: ``"suction"`` or ``"hand"``.
+        prefix: the robot's name prefix (``"jaco/"``, ``"gantry/"``).
         is_free (n,), free_ids: mushrooms with a free joint (the others are static bodies).
         body_ids, cap_geoms, stem_geoms, cap_top_sites (n,): MuJoCo ids.
         dofadr, root_eq, grip_eq (n,): free-joint dof address, root weld, grip weld (-1 if none).
@@ -60,6 +59,7 @@ class World:
     data: mujoco.MjData
     scene: Any
     tool: str
+    prefix: str
     is_free: np.ndarray
     free_ids: np.ndarray
     body_ids: np.ndarray
@@ -112,7 +112,7 @@ def free_set(scene: Any, target: int, free_radius: float | None) -> set[int]:
     return {int(i) for i in np.nonzero(near)[0]} | {int(target)}
 
 
-def world_spec(scene: Any, free: set[int], robot: RobotConfig, timestep: float) -> mujoco.MjSpec:
+def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float) -> mujoco.MjSpec:
     """The scene + robot ``MjSpec`` (grip welds or stem sockets per free mushroom, cameras)."""
     from generator.mjcf import scene_to_spec
 
@@ -121,7 +121,7 @@ def world_spec(scene: Any, free: set[int], robot: RobotConfig, timestep: float) 
     if robot.tool == "suction":
         for i in sorted(free):
             spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
-                              objtype=mujoco.mjtObj.mjOBJ_BODY, name1=PREFIX + CUP_BODY,
+                              objtype=mujoco.mjtObj.mjOBJ_BODY, name1=robot.prefix + CUP_BODY,
                               name2=f"mushroom_{i}", active=False)
     else:
         add_stem_sockets(spec, scene, sorted(free))
@@ -142,7 +142,7 @@ def world_spec(scene: Any, free: set[int], robot: RobotConfig, timestep: float) 
     return spec
 
 
-def build_world(scene: Any, target: int, robot: RobotConfig, free_radius: float | None,
+def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | None,
                 timestep: float, cache: dict[Any, mujoco.MjModel] | None = None,
                 cache_key: Any = None) -> World:
     """Assemble the world; with ``cache`` and ``cache_key``, the compiled model is kept there
@@ -186,12 +186,13 @@ def build_world(scene: Any, target: int, robot: RobotConfig, free_radius: float 
     m.body_contype[0] |= ph.SOIL_CONTYPE
     m.body_conaffinity[0] |= ph.SOIL_CONAFFINITY
     robot_geom = np.zeros(m.ngeom, bool)
-    robot_geom[[g for g in range(m.ngeom) if m.geom(g).name.startswith(PREFIX)]] = True
-    cup_geom = m.geom(PREFIX + CUP_GEOM).id if suction else -1  # -1: the seal test never fires
-    force, torque = m.sensor(PREFIX + WRIST_FORCE), m.sensor(PREFIX + WRIST_TORQUE)
+    prefix = robot.prefix
+    robot_geom[[g for g in range(m.ngeom) if m.geom(g).name.startswith(prefix)]] = True
+    cup_geom = m.geom(prefix + CUP_GEOM).id if suction else -1  # -1: the seal test never fires
+    force, torque = m.sensor(prefix + WRIST_FORCE), m.sensor(prefix + WRIST_TORQUE)
     socket = 0 if suction else ph.SOCKET_CONAFFINITY
     return World(
-        model=m, data=d, scene=scene, tool=robot.tool, is_free=is_free,
+        model=m, data=d, scene=scene, tool=robot.tool, prefix=prefix, is_free=is_free,
         free_ids=np.array(sorted(free)), body_ids=body_ids, cap_geoms=cap_geoms,
         stem_geoms=stem_geoms,
         cap_top_sites=np.array([m.site(f"mushroom_{i}_cap_top").id for i in range(n)]),
@@ -200,10 +201,10 @@ def build_world(scene: Any, target: int, robot: RobotConfig, free_radius: float 
         root_eq=root_eq,
         grip_eq=np.array([m.equality(f"grip_{i}").id if suction and i in free else -1 for i in range(n)]),
         is_root_eq=is_root_eq, geom_mushroom=geom_mushroom, is_cap=is_cap, robot_geom=robot_geom,
-        cup_geom=cup_geom, cup_body=m.body(PREFIX + CUP_BODY).id if suction else -1,
-        tool_site=m.site(PREFIX + TOOL_SITE).id, terrain_geom=terrain,
-        arm_qadr=np.array([m.jnt_qposadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS]),
-        arm_dadr=np.array([m.jnt_dofadr[m.joint(PREFIX + j).id] for j in ARM_JOINTS]),
+        cup_geom=cup_geom, cup_body=m.body(prefix + CUP_BODY).id if suction else -1,
+        tool_site=m.site(prefix + TOOL_SITE).id, terrain_geom=terrain,
+        arm_qadr=np.array([m.jnt_qposadr[m.joint(prefix + j).id] for j in robot.joints]),
+        arm_dadr=np.array([m.jnt_dofadr[m.joint(prefix + j).id] for j in robot.joints]),
         wrench_adr=np.r_[force.adr[0]:force.adr[0] + 3, torque.adr[0]:torque.adr[0] + 3],
         cap_radius=np.array([inst.cap_diameter / 2 for inst in scene.instances]),
         free_aff=ph.FREE_CONAFFINITY | socket, lifted_aff=ph.LIFTED_CONAFFINITY | socket,

@@ -17,7 +17,7 @@ import mujoco
 import numpy as np
 
 from sms3d_env.physics import SOCKET_CONTYPE
-from sms3d_env.robot import FINGER_BODIES, FINGER_JOINTS, PREFIX
+from sms3d_env.robot import FINGER_BODIES, FINGER_JOINTS
 
 if TYPE_CHECKING:
     from sms3d_env.physics_params import PickPhysicsParams
@@ -37,15 +37,16 @@ class Hand:
     def __init__(self, world: World, params: PickPhysicsParams | None, state: EpisodeState) -> None:
         self.world, self.state = world, state
         model = world.model
-        ids = [model.joint(PREFIX + j).id for j in FINGER_JOINTS]
+        prefix = world.prefix
+        ids = [model.joint(prefix + j).id for j in FINGER_JOINTS]
         self.qadr = model.jnt_qposadr[ids]
         self.lo, self.hi = model.jnt_range[ids, 0], model.jnt_range[ids, 1]
-        self.act = np.array([model.actuator(PREFIX + f"act_{j}").id for j in FINGER_JOINTS])
+        self.act = np.array([model.actuator(prefix + f"act_{j}").id for j in FINGER_JOINTS])
         # Finger index (0-2) of every geom on a finger's proximal or distal body, else -1.
         self.finger_of_geom = np.full(model.ngeom, -1)
         for f, bodies in enumerate(FINGER_BODIES):
             for name in bodies:
-                self.finger_of_geom[model.geom_bodyid == model.body(PREFIX + name).id] = f
+                self.finger_of_geom[model.geom_bodyid == model.body(prefix + name).id] = f
         self.clear()
 
     # ------------------------------------------------------------------ fingers

@@ -1,0 +1,95 @@
+"""The Cartesian gantry harvester: x/y rails over the bed, a vertical lift and a three-axis wrist
+(``assets/gantry.xml``), carrying the same tools as the Jaco.
+
+Most published and commercial mushroom harvesters travel over the shelf on rails (docs/physics.md,
+"Harvesters"): a gantry's links stay above the bed, and its wrist axes meet at one point, so the
+only singularity (a 90 degree tilt) lies outside the wrist's range. The dimensions, masses, gains
+and speeds are ASSUMPTIONs for a small belt-driven gantry, set below.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import mujoco
+
+from sms3d_env.robot import ROBOT_CONAFFINITY, TOOL_CONTYPE, Tool, check_tool_fields, mount_tool
+
+GANTRY_PREFIX = "gantry/"
+GANTRY_JOINTS: tuple[str, ...] = ("rail_x", "rail_y", "lift_z", "wrist_roll", "wrist_pitch", "tool_spin")
+GANTRY_XML = os.path.join(os.path.dirname(__file__), "assets", "gantry.xml")
+_SLIDES = GANTRY_JOINTS[:3]
+
+
+@dataclass(frozen=True)
+class GantryConfig:
+    """The gantry's drives and tool.
+
+    At ``home_q`` (all zeros) the cup is 20 cm above the patch centre, pointing down, as for the
+    Jaco. Every link collides with the soil and the mushrooms.
+
+    Attributes:
+        tool, cup_radius, tube_length, finger_*: the tool, as in ``RobotConfig``.
+        slide_kp: position gain of the x, y and lift drives (N/m). ASSUMPTION: ~40 ms tracking
+            of the 8 kg bridge with ``slide_armature``.
+        slide_force: force limit of those drives (N). ASSUMPTION: a small belt or ball-screw axis.
+        slide_armature: reflected rotor inertia of each slide (kg). ASSUMPTION.
+        wrist_kp, wrist_force: wrist position gain (N m/rad) and torque limit (N m). ASSUMPTION:
+            hobby-to-industrial servo class; 6 N m holds the tool at any tilt.
+        wrist_armature: reflected rotor inertia of each wrist joint (kg m^2). ASSUMPTION: a
+            geared servo (rotor ~1e-6 kg m^2 through ~200:1). Measured why it matters: at
+            0.005 the spin's first twist step put 0.024 N m on the seal (capacity 0.02) and 9 of
+            10 exact-pose picks lost their grip; at 0.05, 10 of 10 picked.
+        (The controller's speed and lead limits on the slides: ``ControllerConfig``.)
+    """
+
+    name: ClassVar[str] = "gantry"
+    prefix: ClassVar[str] = GANTRY_PREFIX
+    joints: ClassVar[tuple[str, ...]] = GANTRY_JOINTS
+
+    mount_pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mount_yaw_deg: float = 0.0
+    mount_roll_deg: float = 0.0
+    tool: Tool = "suction"
+    cup_radius: float = 0.010
+    tube_length: float = 0.09
+    slide_kp: float = 6000.0
+    slide_force: float = 150.0
+    slide_armature: float = 1.0
+    wrist_kp: float = 60.0
+    wrist_force: float = 6.0
+    wrist_armature: float = 0.05
+    finger_kp: float = 2.0
+    finger_force: float = 0.25
+    finger_damping: float = 0.1
+    finger_armature: float = 0.001
+    home_q: tuple[float, ...] = field(default=(0.0,) * 6)
+
+    def __post_init__(self) -> None:
+        check_tool_fields(self)
+        if len(self.home_q) != 6:
+            raise ValueError(f"GantryConfig.home_q must have 6 entries, got {len(self.home_q)}")
+        for name in ("slide_kp", "slide_force", "slide_armature", "wrist_kp", "wrist_force",
+                     "wrist_armature"):
+            value = getattr(self, name)
+            if not value > 0:
+                raise ValueError(f"GantryConfig.{name} must be > 0, got {value!r}")
+
+    def build_spec(self) -> mujoco.MjSpec:
+        spec = mujoco.MjSpec.from_file(GANTRY_XML)
+        for body in spec.bodies[2:]:  # everything that moves (world and the static frame aside)
+            body.gravcomp = 1.0
+        for g in spec.geoms:
+            g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
+        for jname in GANTRY_JOINTS:
+            slide = jname in _SLIDES
+            spec.joint(jname).armature = self.slide_armature if slide else self.wrist_armature
+            act = spec.add_actuator(name=f"act_{jname}", target=jname, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            act.set_to_position(kp=self.slide_kp if slide else self.wrist_kp, dampratio=1.0)
+            limit = self.slide_force if slide else self.wrist_force
+            act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            act.forcerange = [-limit, limit]
+        mount_tool(spec, spec.body("flange"), self, (1.0, 0.0, 0.0, 0.0))
+        return spec

@@ -1,0 +1,104 @@
+"""SMS3DPick-v1: an honest robot (every link collides), the gantry beside the Jaco, robot names,
+``not_reached`` and the simulated time."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import sms3d_env  # noqa: F401  (registers the ids)
+from generator import SceneConfig
+from sms3d_env.pickers.episode import run_episode
+from sms3d_env.pickers.scripted import ScriptedPicker
+from sms3d_env.robots import ROBOTS
+
+SMALL = SceneConfig().replace(placement__num_mushrooms=10)
+
+
+def _can_touch(model, a: int, b: int) -> bool:
+    """MuJoCo's contact filter between geoms ``a`` and ``b`` (either's contype in the other's
+    conaffinity)."""
+    return bool(model.geom_contype[a] & model.geom_conaffinity[b] or model.geom_contype[b] & model.geom_conaffinity[a])
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_every_robot_body_can_touch_the_soil_and_every_mushroom(robot):
+    env = gym.make("SMS3DPick-v1", robot=robot, scene_config=SMALL)
+    env.reset(seed=3)
+    u = env.unwrapped
+    m, w = u.model, u.world
+    robot_bodies = {int(m.geom_bodyid[g]) for g in np.nonzero(w.robot_geom)[0]}
+    assert len(robot_bodies) >= 6
+    mushroom_geoms = np.concatenate([w.cap_geoms, w.stem_geoms])
+    for body in robot_bodies:
+        geoms = np.nonzero((m.geom_bodyid == body) & w.robot_geom)[0]
+        name = m.body(body).name
+        assert any(_can_touch(m, g, w.terrain_geom) for g in geoms), f"{name} passes through the soil"
+        for k in mushroom_geoms:
+            assert any(_can_touch(m, g, k) for g in geoms), f"{name} passes through {m.geom(k).name}"
+
+
+def test_the_jaco_of_v0_still_has_its_ghost_links():
+    # The comparison the version history states: v0's base, shoulder, upper arm, forearm and
+    # first wrist link collide with nothing.
+    env = gym.make("SMS3DPick-v0", scene_config=SMALL)
+    env.reset(seed=3)
+    m, w = env.unwrapped.model, env.unwrapped.world
+    ghosts = {m.body(int(m.geom_bodyid[g])).name for g in np.nonzero(w.robot_geom)[0]
+              if not _can_touch(m, g, w.terrain_geom)}
+    assert ghosts == {f"jaco/{b}" for b in ("b_base", "b_1", "b_2", "b_3", "b_4")}
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_the_exact_pose_scripted_picker_picks_with_every_link_colliding(robot):
+    env = gym.make("SMS3DPick-v1", robot=robot, scene_config=SMALL)
+    results = [run_episode(env, ScriptedPicker(), seed) for seed in range(1_000_000, 1_000_004)]
+    assert sum(r["success"] for r in results) >= 3, results
+    assert all(r["failure_cause"] != "not_reached" for r in results)
+
+
+@pytest.mark.parametrize("env_id", ["SMS3DPick-v1", "SMS3DPickTrain-v1"])
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_check_env_passes(env_id, robot):
+    check_env(gym.make(env_id, robot=robot, scene_config=SMALL).unwrapped, skip_render_check=True)
+
+
+@pytest.mark.parametrize("bad", ["ur5", "", 3, None.__class__])
+def test_a_bad_robot_is_refused_naming_the_argument_and_the_choices(bad):
+    with pytest.raises(ValueError, match=r"robot must be one of \('gantry', 'jaco'\)"):
+        gym.make("SMS3DPick-v1", robot=bad)
+
+
+def test_the_gantry_is_deterministic_by_seed_and_pickles_mid_episode():
+    def rollout(env, steps):
+        obs, _ = env.reset(seed=11)
+        picker = ScriptedPicker()
+        for _ in range(steps):
+            obs, *_ = env.step(picker(obs))
+        return obs, picker
+
+    a = gym.make("SMS3DPick-v1", scene_config=SMALL)
+    b = gym.make("SMS3DPick-v1", scene_config=SMALL)
+    obs_a, picker = rollout(a, 30)
+    obs_b, _ = rollout(b, 30)
+    for key in obs_a:
+        np.testing.assert_array_equal(obs_a[key], obs_b[key])
+    copy = pickle.loads(pickle.dumps(a.unwrapped))
+    action = picker(obs_a)
+    after_a = a.unwrapped.step(action)[0]
+    after_copy = copy.step(action)[0]
+    for key in after_a:
+        np.testing.assert_allclose(after_a[key], after_copy[key], atol=1e-9)
+
+
+def test_an_approach_that_stops_short_is_not_reached_and_time_counts():
+    env = gym.make("SMS3DPick-v1", scene_config=SMALL)
+    env.reset(seed=5)
+    for _ in range(10):
+        _, _, terminated, truncated, info = env.step(np.zeros(7, np.float32))
+    assert info["failure_cause"] == "not_reached"
+    assert info["time_s"] == pytest.approx(10 * env.unwrapped.control_dt)
