@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,18 @@ from sms3d_env.training.rl import InitModelError, train_policy
 
 #: What the training commands raise, before writing anything, for input they cannot use.
 INPUT_ERRORS = (InitModelError, RunFolderError, PolicyFileError)
+
+
+def _summary_or_refusal(run: Callable[[], dict[str, Any]]) -> int:
+    """A training command's last step: run it and print its summary (exit 0), or its refusal of an
+    input it cannot use (exit 2)."""
+    try:
+        summary = run()
+    except INPUT_ERRORS as e:
+        print(f"error: {e}")
+        return 2
+    print(json.dumps(summary, indent=2))
+    return 0
 
 
 def _cmd_train(args: Any) -> int:
@@ -75,13 +88,7 @@ def _cmd_train(args: Any) -> int:
     except ValueError as e:
         print(f"error: {e}")
         return 2
-    try:
-        summary = train_policy(cfg, overwrite=args.overwrite)
-    except INPUT_ERRORS as e:  # raised before any training
-        print(f"error: {e}")
-        return 2
-    print(json.dumps(summary, indent=2))
-    return 0
+    return _summary_or_refusal(lambda: train_policy(cfg, overwrite=args.overwrite))
 
 
 def _cmd_train_bc(args: Any) -> int:
@@ -123,13 +130,7 @@ def _cmd_train_bc(args: Any) -> int:
     except ValueError as e:
         print(f"error: {e}")
         return 2
-    try:
-        summary = train_bc(cfg, overwrite=args.overwrite)
-    except INPUT_ERRORS as e:
-        print(f"error: {e}")
-        return 2
-    print(json.dumps(summary, indent=2))
-    return 0
+    return _summary_or_refusal(lambda: train_bc(cfg, overwrite=args.overwrite))
 
 
 def _cmd_train_trigger(args: Any) -> int:
@@ -143,13 +144,7 @@ def _cmd_train_trigger(args: Any) -> int:
     except ValueError as e:
         print(f"error: {e}")
         return 2
-    try:
-        summary = train_trigger(cfg, overwrite=args.overwrite)
-    except INPUT_ERRORS as e:
-        print(f"error: {e}")
-        return 2
-    print(json.dumps(summary, indent=2))
-    return 0
+    return _summary_or_refusal(lambda: train_trigger(cfg, overwrite=args.overwrite))
 
 
 def _cmd_eval(args: Any) -> int:

@@ -19,6 +19,7 @@ import csv
 import json
 import math
 import os
+import shutil
 import time
 import warnings
 from dataclasses import asdict
@@ -425,6 +426,7 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
     if cfg.normalize:
         env = normalized(env, training=True, reward_gamma=cfg.gamma if cfg.normalize_reward else None)
     eval_env = None
+    refused = False
     try:
         if checkpoint is not None:
             model = _resume_from(checkpoint, env, cfg)
@@ -472,7 +474,14 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
         }
         write_atomic(out / "summary.json", json.dumps(summary, indent=2))
         return summary
+    except InitModelError:
+        # init_model's weights do not fit the network (only building it tells): a new folder made
+        # for this refused run goes, so that the corrected command starts without --overwrite.
+        refused = not run.resumed
+        raise
     finally:
         env.close()
         if eval_env is not None:
             eval_env.close()
+        if refused:
+            shutil.rmtree(out, ignore_errors=True)

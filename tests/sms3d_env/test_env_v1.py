@@ -63,8 +63,17 @@ def test_the_exact_pose_scripted_picker_picks_with_every_link_colliding(robot):
 
 @pytest.mark.parametrize("env_id", ["SMS3DPick-v1", "SMS3DPickTrain-v1"])
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_check_env_passes(env_id, robot):
-    check_env(gym.make(env_id, robot=robot, scene_config=SMALL).unwrapped, skip_render_check=True)
+def test_gymnasium_and_sb3_check_env_pass(env_id, robot):
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+    env = gym.make(env_id, robot=robot, scene_config=SMALL).unwrapped
+    check_env(env, skip_render_check=True)
+    sb3_check_env(env, warn=False)
+
+
+def test_v0_is_deprecated_in_favour_of_v1():
+    with pytest.warns(DeprecationWarning, match="out of date"):
+        gym.make("SMS3DPick-v0", scene_config=SMALL)
 
 
 @pytest.mark.parametrize("bad", ["ur5", "", 3, None.__class__])

@@ -517,6 +517,11 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     with pytest.raises(InitModelError, match="normalize=True"):
         train_policy(TrainConfig(**{**again.__dict__, "normalize": False}))
     assert not (tmp_path / "second").exists()
+    # Weights that do not fit the network are found only once it is built, inside the new run
+    # folder: the refusal removes it, so the corrected command needs no --overwrite.
+    with pytest.raises(InitModelError, match="does not fit"):
+        train_policy(TrainConfig(**{**again.__dict__, "net_arch": (64, 64)}))
+    assert not (tmp_path / "second").exists()
     with pytest.raises(ValueError, match="init_model"):
         TrainConfig(algo="sac", init_model=str(checkpoint))
 

@@ -1,0 +1,74 @@
+"""The scripted picker on SMS3DPick-v1 for each robot and orientation error: successes, failure
+causes, and the cycle time (simulated seconds from reset to a successful lift, median and 90th
+percentile), over held-out seeded 25-mushroom beds (seeds from 1,000,000). Each (robot, error)
+cell runs in a worker process.
+
+Usage: python benchmarks/bench_robots.py [--episodes 200] [--robots gantry jaco]
+       [--errors 0 10 20 30] [--workers 2] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import os
+from multiprocessing import get_context
+
+import numpy as np
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+HELD_OUT_SEED = 1_000_000
+
+
+def run_cell(robot: str, error_deg: float, episodes: int) -> dict:
+    import gymnasium as gym
+
+    import sms3d_env  # noqa: F401  (registers the ids)
+    from generator import SceneConfig
+    from sms3d_env.pickers.episode import run_episode
+    from sms3d_env.pickers.scripted import ScriptedPicker
+
+    env = gym.make("SMS3DPick-v1", robot=robot, scene_config=SceneConfig().replace(placement__num_mushrooms=25),
+                   pose_source="noisy" if error_deg else "oracle", pose_error_deg=error_deg)
+    picker = ScriptedPicker.for_env(env)
+    causes, times = collections.Counter(), []
+    for seed in range(HELD_OUT_SEED, HELD_OUT_SEED + episodes):
+        result = run_episode(env, picker, seed)
+        causes["success" if result["success"] else result["failure_cause"]] += 1
+        if result["success"]:
+            times.append(result["steps"] * env.unwrapped.control_dt)
+    return {"robot": robot, "error_deg": error_deg, "episodes": episodes, "success": causes.pop("success", 0),
+            "failures": dict(causes), "time_median_s": float(np.median(times)) if times else None,
+            "time_p90_s": float(np.percentile(times, 90)) if times else None}
+
+
+def _cell(args: tuple[str, float, int]) -> dict:
+    return run_cell(*args)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--robots", nargs="+", default=["gantry", "jaco"])
+    parser.add_argument("--errors", type=float, nargs="+", default=[0.0, 10.0, 20.0, 30.0])
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--json", default=None, help="also write the rows here")
+    args = parser.parse_args()
+    cells = [(r, e, args.episodes) for r in args.robots for e in args.errors]
+    with get_context("spawn").Pool(args.workers) as pool:
+        rows = pool.map(_cell, cells)
+    print("| robot | error (deg) | success | failures | cycle time median / p90 (s) |")
+    print("| --- | --- | --- | --- | --- |")
+    for row in rows:
+        failures = ", ".join(f"{k} {v}" for k, v in sorted(row["failures"].items())) or "none"
+        times = "n/a" if row["time_median_s"] is None else f"{row['time_median_s']:.2f} / {row['time_p90_s']:.2f}"
+        print(f"| {row['robot']} | {row['error_deg']:g} | {row['success']}/{row['episodes']} | {failures} | {times} |")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(rows, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
