@@ -96,7 +96,7 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
     print(f"from pixels (shipped segmenter + axis CNN): {found} mushrooms estimated: {out / 'perception.png'}")
     rates = {}
     for label, source, name in PICKS:
-        env = gym.make("SMS3DPick-v0", scene_config=config, render_mode="rgb_array", camera="side",
+        env = gym.make("SMS3DPick-v1", scene_config=config, render_mode="rgb_array", camera="side",
                        render_size=(240, 320), **source)
         picker = ScriptedPicker.for_env(env)
         strip, info = picker_strip(env, picker, seed)
