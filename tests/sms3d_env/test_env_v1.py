@@ -111,3 +111,22 @@ def test_an_approach_that_stops_short_is_not_reached_and_time_counts():
         _, _, terminated, truncated, info = env.step(np.zeros(7, np.float32))
     assert info["failure_cause"] == "not_reached"
     assert info["time_s"] == pytest.approx(10 * env.unwrapped.control_dt)
+
+
+def test_async_vector_envs_are_seeded_and_close_their_workers():
+    import multiprocessing
+
+    def first_observations():
+        envs = gym.make_vec("SMS3DPick-v1", num_envs=4, vectorization_mode="async", scene_config=SMALL)
+        try:
+            obs, _ = envs.reset(seed=[1, 2, 3, 4])
+            envs.step(np.zeros((4, 7), np.float32))
+            return obs
+        finally:
+            envs.close()
+
+    a, b = first_observations(), first_observations()
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key])
+    assert len({tuple(row) for row in a["target_pose"]}) == 4  # four different beds
+    assert multiprocessing.active_children() == []
