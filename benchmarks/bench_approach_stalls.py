@@ -33,7 +33,7 @@ from tqdm import tqdm  # noqa: E402
 import generator  # noqa: E402
 from sms3d_env.controller import ControllerConfig  # noqa: E402
 from sms3d_env.pickers.registry import PickerSpec, make_picker_env  # noqa: E402
-from sms3d_env.study.report import mcnemar_p, wilson_interval  # noqa: E402
+from sms3d_env.study.statistics import mcnemar_p, wilson_interval  # noqa: E402
 
 
 def run(error: float, posture_cost: float, beds: int, episodes: int, seed: int) -> list[tuple[bool, str, bool]]:

@@ -26,7 +26,7 @@ from tqdm import tqdm  # noqa: E402
 import generator  # noqa: E402
 from sms3d_env.pickers.episode import run_episode  # noqa: E402
 from sms3d_env.pickers.registry import make_picker_env, parse_picker  # noqa: E402
-from sms3d_env.study.report import mcnemar_p, wilson_interval  # noqa: E402
+from sms3d_env.study.statistics import mcnemar_p, wilson_interval  # noqa: E402
 
 
 def run(picker_text: str, beds: list[int], episodes: int, error: float, seed: int) -> dict:

@@ -37,7 +37,7 @@ import generator  # noqa: E402
 from sms3d_env.pickers.episode import run_episode  # noqa: E402
 from sms3d_env.pickers.registry import PickerSpec, make_picker_env  # noqa: E402
 from sms3d_env.pickers.scripted import ScriptedPicker  # noqa: E402
-from sms3d_env.study.report import mcnemar_p, wilson_interval  # noqa: E402
+from sms3d_env.study.statistics import mcnemar_p, wilson_interval  # noqa: E402
 from sms3d_env.training.imitation import with_true_target  # noqa: E402
 
 ALL_PHASES = frozenset({"approach", "descend", "settle", "twist", "lift"})

@@ -19,7 +19,7 @@ _EXPORTS = {
     "ControllerConfig": "controller", "IKController": "controller",
     "PickPhysicsParams": "physics_params",
     "FAILURE_CAUSES": "picking_model", "SMS3DPickEnv": "pick_env",
-    "EpisodeState": "picking_model", "PickingModel": "picking_model",
+    "EpisodeState": "episode_state", "PickingModel": "picking_model",
     "World": "world", "build_world": "world",
     "NoisyPose": "pose_sources", "OraclePose": "pose_sources", "PoseEstimate": "pose_sources",
     "PoseSource": "pose_sources", "UniformNoisyPose": "pose_sources", "make_pose_source": "pose_sources",

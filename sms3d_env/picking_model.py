@@ -24,13 +24,13 @@ Usage (what ``SMS3DPickEnv.step`` does)::
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import mujoco
 import numpy as np
 
 from sms3d_env import physics as ph
+from sms3d_env.episode_state import EpisodeState
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.tools import Tool, make_tool
 from sms3d_env.world import World
@@ -41,33 +41,6 @@ FAILURE_CAUSES = ("not_reached", "no_seal", "grip_lost", "not_detached", "bruise
 #: episode that never did fails as ``not_reached`` (the approach stopped short), not ``no_seal``.
 REACHED_DISTANCE = 0.01
 _EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-
-
-@dataclass
-class EpisodeState:
-    """What the picking model knows of the episode so far (mushroom ids index the scene)."""
-
-    target: int = 0
-    reachable: bool = True
-    steps: int = 0  # control steps taken
-    grip: int = -1  # mushroom id held (sealed by the cup, or pinched by the fingers), -1 if none
-    grip_util: float = 0.0  # suction: seal load as a fraction of its capacity
-    finger_force: float = 0.0  # hand: finger normal force on the target (N)
-    tool_on: bool = False  # suction on, or hand commanded more closed than half
-    ever_gripped_target: bool = False
-    held_detached: bool = False  # hand: the target was held after its detachment
-    finger_touch_step: int = -1  # hand: last env step in which a finger touched the target
-    target_detached: bool = False
-    grip_lost: bool = False
-    bruised: set[int] = field(default_factory=set)
-    detached: set[int] = field(default_factory=set)
-    disturbed: set[int] = field(default_factory=set)
-    unstable: bool = False
-    max_lift: float = 0.0
-    closest_approach: float = np.inf  # the tool site's least distance to the target's cap top (m)
-    root_util: float = 0.0  # target root load / capacity, largest in this control step (reward only)
-    seal_step: int = -1  # control step at which the current seal formed (-1: none)
-    seal_tool_x: np.ndarray | None = None  # tool x axis (world) when it formed
 
 
 class PickingModel:

@@ -3,13 +3,15 @@ and the id tables the picking model and the env read (dm_control's entities, apa
 
 ``build_world(scene, target, ...)`` returns a ``World``. Only mushrooms within ``free_radius`` of
 the target keep a free joint and a root weld; with the suction tool each of them also gets an
-inactive grip weld to the cup. Contact masks (physics.py's bits) are set here once; the picking
+inactive grip weld to the cup, with the hand a stem socket (``add_stem_sockets``) that holds it
+up once detached. Contact masks (physics.py's bits) are set here once; the picking
 model changes them as mushrooms detach and lift.
 """
 
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,7 +28,6 @@ from sms3d_env.robot import (
     RobotSpec,
     attach_robot,
 )
-from sms3d_env.tools.hand import add_stem_sockets
 
 _STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 
@@ -110,6 +111,21 @@ def free_set(scene: Any, target: int, free_radius: float | None) -> set[int]:
     base = np.array([np.asarray(inst.position, float) for inst in scene.instances])
     near = np.linalg.norm(base - base[target], axis=1) <= free_radius
     return {int(i) for i in np.nonzero(near)[0]} | {int(target)}
+
+
+def add_stem_sockets(spec: mujoco.MjSpec, scene: Any, ids: Iterable[int], drop: float = 0.001) -> None:
+    """A thin static box ``drop`` below the lowest point of each listed mushroom's stem, felt
+    only by detached mushrooms (``physics.SOCKET_CONTYPE``): the casing around the stem base that
+    holds a detached mushroom up until it is lifted out of its hole."""
+    for i in ids:
+        inst = scene.instances[i]
+        local = np.asarray(inst.model.stem_mesh.vertices) * inst.scale_vector
+        world = local @ np.asarray(inst.rotation).T + inst.position
+        half = float(np.hypot(local[:, 0], local[:, 1]).max()) + 0.002
+        spec.worldbody.add_geom(
+            name=f"socket_{i}", type=mujoco.mjtGeom.mjGEOM_BOX, size=[half, half, 0.002],
+            pos=[inst.position[0], inst.position[1], world[:, 2].min() - drop - 0.002],
+            contype=ph.SOCKET_CONTYPE, conaffinity=0, group=4, rgba=[0.4, 0.3, 0.2, 0])
 
 
 def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float) -> mujoco.MjSpec:

@@ -1,88 +1,31 @@
-"""Statistics and reports of the pose-error sweep: Wilson intervals, the tolerable error, and
-the CSV, PNG and Markdown outputs."""
+"""The report of the pose-error sweep: the CSV, the 1-D curve (PNG) and the Markdown summary,
+with the 2-D success map and the slices (:mod:`~sms3d_env.study.success_map`) when the sweep has
+them (``write_report``). The numbers are :mod:`~sms3d_env.study.statistics`'s, the figure helpers
+:mod:`~sms3d_env.study.figures`'s."""
 
 from __future__ import annotations
 
 import io
-import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from generator.files import write_atomic
+from sms3d_env.study import success_map
+from sms3d_env.study.figures import plot_curves, save_figure
+from sms3d_env.study.statistics import (
+    TILTED_DEG,
+    WITHIN_PP,
+    axes,
+    crowded_threshold,
+    perception_point,
+    success_table,
+    tolerable_error,
+)
 
-TILTED_DEG = 30.0  # "tilted" mushrooms in the summary
-WITHIN_PP = 5.0  # success within this many percentage points of the oracle counts as "enough"
 PAPER_ERRORS_DEG = {"SMS3D synthetic (Point Transformer)": 1.67, "SMS3D real (M18K)": 3.68}
-
-
-def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """95 % Wilson score interval for a binomial proportion: ``lo <= successes / n <= hi``, both
-    in [0, 1], ``hi`` exactly 1 for n/n and ``lo`` exactly 0 for 0/n."""
-    if n == 0:
-        return (math.nan, math.nan)
-    p = successes / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    # Exactly, the interval holds p and ends at 1 for n/n (0 for 0/n); rounding can leave an end
-    # an ulp on the wrong side of p (4/4 gives 0.9999999999999999), a negative error bar.
-    return (min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half)))
-
-
-def axes(row: dict[str, Any]) -> tuple[str, int, float]:
-    """A row's (tool, bed size, cap-top position error in mm): the sweep's axes besides the
-    orientation error and the physics variant (rows of earlier sweeps: suction, 25, 0)."""
-    return (row.get("tool", "suction"), int(row.get("num_mushrooms", 25)),
-            float(row.get("position_error_mm", 0.0)))
-
-
-def mcnemar_p(a: Sequence[bool], b: Sequence[bool]) -> float:
-    """Two-sided exact McNemar p-value of paired outcomes ``a`` vs ``b`` (episode i of each on
-    the same scene): the binomial test of the discordant pairs."""
-    from scipy.stats import binomtest
-
-    only_a = sum(x and not y for x, y in zip(a, b, strict=True))
-    only_b = sum(y and not x for x, y in zip(a, b, strict=True))
-    return 1.0 if only_a + only_b == 0 else float(binomtest(only_a, only_a + only_b, 0.5).pvalue)
-
-
-def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]], bool] = lambda r: True) -> list[dict[str, Any]]:
-    """Success rate with its interval and failure-cause counts per (variant, position error,
-    orientation error), for rows of one tool and bed size."""
-    groups: dict[tuple[str, float, float], list[dict[str, Any]]] = {}
-    for r in rows:
-        if r["reachable"] and r.get("source", "noisy") == "noisy" and keep(r):
-            groups.setdefault((r["variant"], axes(r)[2], r["error_deg"]), []).append(r)
-    table = []
-    for (variant, position, error), group in sorted(groups.items()):
-        wins = sum(r["success"] for r in group)
-        lo, hi = wilson_interval(wins, len(group))
-        causes: dict[str, int] = {}
-        for r in group:
-            if not r["success"]:
-                causes[r["failure_cause"] or "unknown"] = causes.get(r["failure_cause"] or "unknown", 0) + 1
-        table.append({"variant": variant, "position_error_mm": position, "error_deg": error, "n": len(group),
-                      "success": wins / len(group), "ci_low": lo, "ci_high": hi, "causes": causes})
-    return table
-
-
-def tolerable_error(table: Sequence[dict[str, Any]], variant: str = "default", within_pp: float = WITHIN_PP) -> float | None:
-    """Largest error whose success, and that of every smaller error, stays within ``within_pp``
-    percentage points of the zero-error (oracle) success; None without a zero-error row."""
-    rows = sorted((r for r in table if r["variant"] == variant), key=lambda r: r["error_deg"])
-    if not rows or rows[0]["error_deg"] != 0.0:
-        return None
-    oracle = rows[0]["success"]
-    answer = 0.0
-    for r in rows:
-        if oracle - r["success"] > within_pp / 100.0 + 1e-9:  # "within" includes exactly 5 points
-            break
-        answer = r["error_deg"]
-    return answer
-
 
 CSV_COLUMNS = ("variant", "picker", "tool", "num_mushrooms", "source", "error_deg", "position_error_mm",
                "axis_error_deg", "cap_top_error_mm", "seed", "target", "reachable", "success",
@@ -98,27 +41,6 @@ def write_csv(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
     writer.writeheader()
     writer.writerows(rows)
     write_atomic(Path(path), buffer.getvalue())
-
-
-def perception_point(rows: Sequence[dict[str, Any]]) -> dict[str, float] | None:
-    """Success of the perception pose source with its measured stem-axis error (mean, median,
-    10th and 90th percentiles), or None if the sweep ran no perception episodes."""
-    runs = [r for r in rows if r.get("source") == "perception" and r["reachable"]]
-    if not runs:
-        return None
-    errors = np.array([r["axis_error_deg"] for r in runs], dtype=float)
-    wins = sum(r["success"] for r in runs)
-    lo, hi = wilson_interval(wins, len(runs))
-    return {"error_deg": float(errors.mean()), "median_error_deg": float(np.median(errors)),
-            "p10_error_deg": float(np.percentile(errors, 10)), "p90_error_deg": float(np.percentile(errors, 90)),
-            "success": wins / len(runs),
-            "ci_low": lo, "ci_high": hi, "n": len(runs)}
-
-
-def crowded_threshold(rows: Sequence[dict[str, Any]]) -> float:
-    """Nearest-neighbour distance below which a target counts as crowded: the lowest quartile."""
-    distances = [r["nn_distance"] for r in rows if math.isfinite(r["nn_distance"])]
-    return float(np.percentile(distances, 25)) if distances else math.inf
 
 
 def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dict[str, float] | None = None) -> None:
@@ -169,69 +91,6 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     bottom.grid(alpha=0.3)
     if causes:
         bottom.legend(fontsize=8)
-    fig.tight_layout()
-    save_figure(fig, path)
-
-
-def save_figure(fig: Any, path: str | Path) -> None:
-    """Write a matplotlib figure as PNG atomically and close it."""
-    import matplotlib.pyplot as plt
-
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=120)
-    plt.close(fig)
-    write_atomic(Path(path), buffer.getvalue())
-
-
-def check_figure_path(out: str | Path, flag: str = "--out") -> None:
-    """``ValueError`` naming ``flag`` unless ``out`` can be a figure's path: not empty, no folder,
-    in a folder that exists (checked before the work, which would otherwise be lost at the end)."""
-    path = Path(out)
-    if not str(out).strip():
-        raise ValueError(f"{flag} must name a PNG file, got an empty path")
-    if path.is_dir():
-        raise ValueError(f"{flag} {out}: is a folder; name the PNG file to write")
-    if not path.absolute().parent.is_dir():
-        raise ValueError(f"{flag} {out}: the folder {path.absolute().parent} does not exist")
-
-
-def distinct_names(paths: Sequence[str | Path]) -> list[str]:
-    """A label per folder: the shortest suffix of its path that no other folder's path ends with
-    (``a/seed0`` and ``b/seed0`` for two runs named ``seed0``); ``ValueError`` naming a folder
-    given twice."""
-    parts = [Path(p).resolve().parts for p in paths]
-    for i, mine in enumerate(parts):
-        if mine in parts[:i]:
-            raise ValueError(f"{paths[i]} is given twice")
-    names = []
-    for mine in parts:
-        depth = next(k for k in range(1, len(mine) + 1)
-                     if all(other[-k:] != mine[-k:] for other in parts if other != mine))
-        names.append(str(Path(*mine[-depth:])))
-    return names
-
-
-def plot_curves(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path, title: str,
-                xlabel: str = "orientation error θ (degrees, rotation perpendicular to the stem)") -> None:
-    """Success vs orientation error with 95 % Wilson intervals, one line per label; each value
-    is a ``success_table`` of one slice."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for label, table in curves.items():
-        y = [100 * t["success"] for t in table]
-        err = [[100 * (t["success"] - t["ci_low"]) for t in table], [100 * (t["ci_high"] - t["success"]) for t in table]]
-        ax.errorbar([t["error_deg"] for t in table], y, yerr=err, marker="o", capsize=3,
-                    label=f"{label} (n = {min(t['n'] for t in table)}/error)")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("pick success (%)")
-    ax.set_ylim(0, 105)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
-    ax.set_title(title)
     fig.tight_layout()
     save_figure(fig, path)
 
@@ -307,8 +166,6 @@ def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str =
     map (``sweep_map.png``), one over tools or bed sizes their slices (``sweep_slices.png``), and
     the summary states the tolerance region (:mod:`sms3d_env.study.success_map`). Each file is replaced
     atomically; if any of them fails, none is left (see below)."""
-    from sms3d_env.study import success_map
-
     out = Path(out)
     tool, size, position = base_slice(rows)
     base = [r for r in rows if axes(r)[:2] == (tool, size) and (r.get("source") == "perception" or axes(r)[2] == position)]

@@ -390,7 +390,8 @@ def load_rows(folder: str | Path) -> list[dict[str, Any]]:
 def _cmd_compare(args: Any) -> int:
     import sys
 
-    from sms3d_env.study.report import check_figure_path, distinct_names, plot_pickers
+    from sms3d_env.study.figures import check_figure_path, distinct_names
+    from sms3d_env.study.report import plot_pickers
 
     try:
         check_figure_path(args.out)
@@ -418,7 +419,8 @@ def _cmd_compare(args: Any) -> int:
 def compared_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """The episodes ``sweep-compare`` sets side by side: the noisy pose source with the default
     physics, in the sweep's base slice (its first tool and bed size, smallest position error)."""
-    from sms3d_env.study.report import axes, base_slice
+    from sms3d_env.study.report import base_slice
+    from sms3d_env.study.statistics import axes
 
     default = [r for r in rows if r.get("source", "noisy") == "noisy" and r["variant"] == "default"]
     if not default:
@@ -440,7 +442,7 @@ def _spans(values: list[int]) -> str:
 
 def _design(rows: list[dict[str, Any]]) -> dict[str, str]:
     """What must be the same in two sweeps' ``compared_rows`` for their episodes to pair."""
-    from sms3d_env.study.report import axes
+    from sms3d_env.study.statistics import axes
 
     tool, size, position = axes(rows[0])
     return {"tool": tool, "bed size": f"{size} mushrooms", "position error": f"{position:g} mm",
@@ -475,7 +477,7 @@ def picker_comparison(curves: dict[str, list[dict[str, Any]]]) -> str:
     """Markdown: each picker's success per orientation error on its ``compared_rows`` (reachable
     targets) and the exact McNemar p against the first picker on the episodes both ran (paired
     by seed)."""
-    from sms3d_env.study.report import mcnemar_p, wilson_interval
+    from sms3d_env.study.statistics import mcnemar_p, wilson_interval
 
     def outcomes(rows: list[dict[str, Any]]) -> dict[float, dict[int, bool]]:
         """Per error, seed -> success of the reachable targets."""

@@ -10,8 +10,8 @@ from sms3d_env.tools.hand import Hand
 from sms3d_env.tools.suction import Suction
 
 if TYPE_CHECKING:
+    from sms3d_env.episode_state import EpisodeState
     from sms3d_env.physics_params import PickPhysicsParams
-    from sms3d_env.picking_model import EpisodeState
     from sms3d_env.world import World
 
 __all__ = ["Hand", "Suction", "Tool", "make_tool"]

@@ -16,7 +16,8 @@ every control step; the tool decides what it holds and when it lets go:
 | ``observation`` | every observation | (on, sealed, seal load / capacity) | (closure, holding, finger force) |
 
 A tool is built per episode on its ``World``, the ``PickPhysicsParams`` and the episode's
-``EpisodeState`` (which it reads and writes: ``grip``, ``tool_on`` and its own entries).
+``EpisodeState`` (:mod:`sms3d_env.episode_state`; it reads and writes ``grip``, ``tool_on`` and
+its own entries).
 """
 
 from __future__ import annotations

@@ -5,23 +5,21 @@ counts as *held* while at least ``MIN_FINGERS`` fingers touch it with the hand c
 the picking model reports each physics step's finger contacts (``on_contact``), then asks what is
 held (``update_hold``). Fingers closing on a cap detach it before they hold it, so the hand has no
 dead end; a detached target that leaves the fingers for a whole control step is a lost grip.
-``add_stem_sockets`` is the hand's part of the world: what holds a detached mushroom up.
+What holds a detached mushroom up until it is lifted is the world's: the stem sockets that
+``world.world_spec`` adds with the hand (``world.add_stem_sockets``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-import mujoco
 import numpy as np
 
-from sms3d_env.physics import SOCKET_CONTYPE
 from sms3d_env.robot import FINGER_BODIES, FINGER_JOINTS
 
 if TYPE_CHECKING:
+    from sms3d_env.episode_state import EpisodeState
     from sms3d_env.physics_params import PickPhysicsParams
-    from sms3d_env.picking_model import EpisodeState
     from sms3d_env.world import World
 
 MIN_FINGERS = 2  # a thumb against one finger already pinches; one finger alone only pushes
@@ -116,18 +114,3 @@ class Hand:
         """(closure 0-1, holding with >= 2 fingers, finger force on the target N)."""
         ep = self.state
         return self.closure(), float(ep.grip >= 0), ep.finger_force
-
-
-def add_stem_sockets(spec: mujoco.MjSpec, scene: Any, ids: Iterable[int], drop: float = 0.001) -> None:
-    """A thin static box ``drop`` below the lowest point of each listed mushroom's stem, felt
-    only by detached mushrooms (``physics.SOCKET_CONTYPE``): the casing around the stem base that
-    holds a detached mushroom up until it is lifted out of its hole."""
-    for i in ids:
-        inst = scene.instances[i]
-        local = np.asarray(inst.model.stem_mesh.vertices) * inst.scale_vector
-        world = local @ np.asarray(inst.rotation).T + inst.position
-        half = float(np.hypot(local[:, 0], local[:, 1]).max()) + 0.002
-        spec.worldbody.add_geom(
-            name=f"socket_{i}", type=mujoco.mjtGeom.mjGEOM_BOX, size=[half, half, 0.002],
-            pos=[inst.position[0], inst.position[1], world[:, 2].min() - drop - 0.002],
-            contype=SOCKET_CONTYPE, conaffinity=0, group=4, rgba=[0.4, 0.3, 0.2, 0])

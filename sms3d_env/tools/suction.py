@@ -20,7 +20,7 @@ from sms3d_env import physics as ph
 from sms3d_env.physics_params import PickPhysicsParams
 
 if TYPE_CHECKING:
-    from sms3d_env.picking_model import EpisodeState
+    from sms3d_env.episode_state import EpisodeState
     from sms3d_env.world import World
 
 _EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)

@@ -39,7 +39,7 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
     """
     from tqdm import tqdm
 
-    from sms3d_env.study.report import wilson_interval
+    from sms3d_env.study.statistics import wilson_interval
 
     for name, value, least in (("episodes", episodes, 1), ("seed", seed, 0),
                                ("max_episode_steps", max_episode_steps, 1)):

@@ -87,7 +87,7 @@ def plot_curves(runs: dict[str, list[dict[str, float]]], path: str | Path) -> No
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from sms3d_env.study.report import save_figure
+    from sms3d_env.study.figures import save_figure
 
     fig, (by_steps, by_wall) = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for label, points in runs.items():
@@ -112,7 +112,7 @@ def plot_curves(runs: dict[str, list[dict[str, float]]], path: str | Path) -> No
 def _cmd(args: Any) -> int:
     import sys
 
-    from sms3d_env.study.report import check_figure_path, distinct_names
+    from sms3d_env.study.figures import check_figure_path, distinct_names
 
     try:
         check_figure_path(args.out)

@@ -15,7 +15,8 @@ from generator.dataset.errors import CorruptFileError
 from generator.errors import ConfigError
 from sms3d_env.cli import main
 from sms3d_env.study import report as study_report
-from sms3d_env.study.report import success_table, tolerable_error, wilson_interval, write_report
+from sms3d_env.study.report import write_report
+from sms3d_env.study.statistics import success_table, tolerable_error, wilson_interval
 from sms3d_env.study.sweep import SweepConfig, plan_tasks, run_sweep
 
 
@@ -193,7 +194,7 @@ def test_a_failed_report_leaves_no_earlier_report_behind(tmp_path, monkeypatch):
 
 
 def test_mcnemar_counts_only_discordant_pairs():
-    from sms3d_env.study.report import mcnemar_p
+    from sms3d_env.study.statistics import mcnemar_p
 
     same = [True, False, True]
     assert mcnemar_p(same, same) == 1.0
