@@ -40,9 +40,14 @@ def save_npz_atomic(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[
     """``arrays`` and ``meta`` (JSON) written to ``path`` through a temporary file and a rename, so
     that a killed run leaves the old file or none, never half of one."""
     path = Path(path)
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays)
-    os.replace(tmp, path)
+    # The process id in the name: two runs sharing a cache folder never write the same file.
+    tmp = path.with_name(f"{path.stem}.tmp{os.getpid()}.npz")
+    try:
+        np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def read_npz_made_with(path: str | Path, meta: dict[str, Any]) -> dict[str, np.ndarray] | None:

@@ -67,12 +67,14 @@ def differing_settings(recorded: Mapping[str, Any], wanted: Mapping[str, Any],
 
 
 def open_run_folder(out: str | Path, settings: Mapping[str, Any], *, overwrite: bool = False,
-                    may_change: Iterable[str] = (), flag: str = "--out") -> RunFolder:
+                    may_change: Iterable[str] = (), may_grow: Iterable[str] = (),
+                    flag: str = "--out") -> RunFolder:
     """Open ``out`` for a run with ``settings``: a new folder, or a resumed one.
 
     - missing or empty: created, ``settings`` recorded; ``resumed=False``;
-    - made with the same settings (``may_change`` aside, e.g. the number of epochs that extends a
-      run): ``resumed=True``, the record updated to the new values of ``may_change``;
+    - made with the same settings (``may_change`` aside, e.g. a worker count, and ``may_grow``
+      where the new value is at least the recorded one, e.g. episodes that extend a run):
+      ``resumed=True``, the record updated to the new values;
     - made with other settings: ``RunFolderError`` naming the differing fields, unless
       ``overwrite``, which empties the folder first;
     - holding files without a settings record: ``RunFolderError`` (``overwrite`` never empties a
@@ -97,7 +99,10 @@ def open_run_folder(out: str | Path, settings: Mapping[str, Any], *, overwrite: 
             except (OSError, ValueError) as exc:
                 raise RunFolderError(record, f"unreadable settings record ({exc}); use --overwrite to start "
                                              "anew") from exc
-            differing = differing_settings(recorded, wanted, may_change)
+            grow = tuple(may_grow)
+            differing = differing_settings(recorded, wanted, (*may_change, *grow))
+            differing += [f"{k} ({recorded[k]!r} → {wanted[k]!r}: it may only grow)" for k in grow
+                          if k in recorded and k in wanted and wanted[k] < recorded[k]]
             if differing:
                 raise RunFolderError(path, f"holds a run made with other settings: {', '.join(differing)}; "
                                            f"rerun with the same settings to resume, use another {flag}, "

@@ -24,7 +24,7 @@ SPLITS = ("train", "val", "test")
 
 #: ``--out`` and ``--overwrite`` of every training command (``generator.run_folder``'s rule).
 RUN_FOLDER_HELP = ("run folder (last.pt, best.pt, log.csv, run_settings.json). Rerun with the same settings, the "
-                   "command resumes from the last finished epoch (more --epochs extend a run); other settings are "
+                   "command resumes from the last finished epoch (more --epochs extend a run, restarting the warm-up + cosine schedule over the new length); other settings are "
                    "refused, naming each")
 OVERWRITE_HELP = "empty --out and start anew, instead of resuming its run or refusing other settings"
 

@@ -31,8 +31,9 @@ class ControllerConfig:
         max_slide_speed: the same for prismatic joints (the gantry's rails and lift, m/s).
             ASSUMPTION: 0.5 m/s, moderate for belt-driven gantries.
         max_lead: largest gap between commanded and measured joint angle (rad).
-        max_slide_lead: the same for prismatic joints (m). ASSUMPTION: 3 mm, so that the
-            gantry's lift (6000 N/m) presses at most 18 N, below the 25 N bruising force.
+        max_slide_lead: the same for prismatic joints (m). ASSUMPTION: 3 mm. (Either command
+            may lead by this plus one step's motion; what bounds the gantry's pressing force is
+            its lift's force limit, ``GantryConfig.lift_force``.)
         position_cost, orientation_cost, posture_cost: mink task weights.
         damping: Levenberg-Marquardt damping of the IK QP.
     """

@@ -33,8 +33,14 @@ class GantryConfig:
     Attributes:
         tool, cup_radius, tube_length, finger_*: the tool, as in ``RobotConfig``.
         slide_kp: position gain of the x, y and lift drives (N/m). ASSUMPTION: ~40 ms tracking
-            of the 8 kg bridge with ``slide_armature``.
-        slide_force: force limit of those drives (N). ASSUMPTION: a small belt or ball-screw axis.
+            of the ~10 kg the x drive moves, with ``slide_armature``. Every moving body is
+            gravity-compensated (``gravcomp``), as the Jaco's links are, so the drives' force
+            limits never carry weight.
+        slide_force: force limit of the x and y drives (N). ASSUMPTION: a small belt axis.
+        lift_force: force limit of the lift (N): what the cup can press a cap with. ASSUMPTION:
+            20 N, below the 25 N bruising force, as a force-limited (compliant) z axis. Measured
+            why: with the lift at ``slide_force``, driving into the soil at full speed pressed
+            46.7 N (the command leads by the slide lead plus a step's motion).
         slide_armature: reflected rotor inertia of each slide (kg). ASSUMPTION.
         wrist_kp, wrist_force: wrist position gain (N m/rad) and torque limit (N m). ASSUMPTION:
             hobby-to-industrial servo class; 6 N m holds the tool at any tilt.
@@ -57,6 +63,7 @@ class GantryConfig:
     tube_length: float = 0.09
     slide_kp: float = 6000.0
     slide_force: float = 150.0
+    lift_force: float = 20.0
     slide_armature: float = 1.0
     wrist_kp: float = 60.0
     wrist_force: float = 6.0
@@ -71,7 +78,7 @@ class GantryConfig:
         check_tool_fields(self)
         if len(self.home_q) != 6:
             raise ValueError(f"GantryConfig.home_q must have 6 entries, got {len(self.home_q)}")
-        for name in ("slide_kp", "slide_force", "slide_armature", "wrist_kp", "wrist_force",
+        for name in ("slide_kp", "slide_force", "lift_force", "slide_armature", "wrist_kp", "wrist_force",
                      "wrist_armature"):
             value = getattr(self, name)
             if not value > 0:
@@ -88,7 +95,7 @@ class GantryConfig:
             spec.joint(jname).armature = self.slide_armature if slide else self.wrist_armature
             act = spec.add_actuator(name=f"act_{jname}", target=jname, trntype=mujoco.mjtTrn.mjTRN_JOINT)
             act.set_to_position(kp=self.slide_kp if slide else self.wrist_kp, dampratio=1.0)
-            limit = self.slide_force if slide else self.wrist_force
+            limit = self.lift_force if jname == "lift_z" else self.slide_force if slide else self.wrist_force
             act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             act.forcerange = [-limit, limit]
         mount_tool(spec, spec.body("flange"), self, (1.0, 0.0, 0.0, 0.0))

@@ -22,6 +22,9 @@ def make_robot(robot: str | RobotSpec) -> RobotSpec:
     if not isinstance(robot, str):
         if not isinstance(robot, (RobotConfig, GantryConfig)):
             raise ValueError(f"robot must be one of {ROBOTS} or a RobotConfig / GantryConfig, got {robot!r}")
+        if isinstance(robot, RobotConfig) and not robot.all_links_collide:
+            raise ValueError("robot: a RobotConfig with all_links_collide=False has links that pass through the "
+                             "soil and the mushrooms; set all_links_collide=True (v0's Jaco is robot=None)")
         return robot
     if robot == "gantry":
         return GantryConfig()

@@ -4,7 +4,8 @@
 resuming reads), ``best.pt`` (the epoch with the best validation mask F1) and ``log.csv``; each
 is replaced atomically, so a run killed at any point resumes from its last finished epoch. The
 folder records the run's settings (``generator.run_folder``): a rerun with the same ones resumes
-(more ``epochs`` or another time limit extend it), other ones are refused unless ``overwrite``.
+(more ``epochs`` or another time limit extend it; the cosine schedule then spans the new
+length, a warm restart), other ones are refused unless ``overwrite``.
 Losses: binary cross-entropy on the mushroom mask, CenterNet's penalty-reduced focal loss on
 the centre heat (Zhou et al., "Objects as Points", 2019), L1 on the offsets.
 """

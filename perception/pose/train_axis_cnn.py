@@ -14,7 +14,7 @@ validation splits (mean axis error, 8 dihedral views) and writes ``last.pt`` (re
 weights, optimiser, epoch), ``best.pt`` (the network with the lowest validation error, in the
 shipped format) and ``log.csv``, all atomically. The output folder records the run's settings
 (``generator.run_folder``): a rerun with the same ones resumes from ``last.pt`` (more ``epochs``
-or another time limit extend it), other ones are refused unless ``overwrite``. Batches are drawn
+or another time limit extend it; the cosine schedule then spans the new length, a warm restart), other ones are refused unless ``overwrite``. Batches are drawn
 from a generator seeded by ``seed`` and the epoch, so a resumed run draws what the uninterrupted
 one would have.
 """

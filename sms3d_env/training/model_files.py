@@ -162,7 +162,12 @@ def finished_run(folder: Path, **expected: Any) -> dict[str, Any] | None:
     path = folder / "summary.json"
     if not path.is_file():
         return None
-    summary = json.loads(path.read_text(encoding="utf-8"))
+    try:
+        summary = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(summary, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError) as exc:
+        raise PolicyFileError(path, f"unreadable run summary ({exc}); --overwrite to start the run anew") from None
     if any(summary.get(k) != v for k, v in expected.items()):
         return None
     print(f"{folder} is complete ({path.name}); nothing to do (--overwrite to start it anew)")

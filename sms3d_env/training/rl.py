@@ -156,6 +156,19 @@ def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:
             raise InitModelError(f"TrainConfig.init_model: {path}: {exc}") from None
 
 
+def _check_init_model_fits(cfg: TrainConfig) -> None:
+    """``cfg.init_model`` loaded into a throwaway model on one env in this process, before the
+    run folder is opened: weights that do not fit are found only by building the network, and a
+    refusal must leave ``cfg.out`` as it was (``InitModelError`` naming the file)."""
+    env = vec_env(cfg.env_kwargs(), 1, cfg.seed, None, "dummy")
+    if cfg.normalize:
+        env = normalized(env, training=True)
+    try:
+        _start_from(_build_model(cfg, env), env, cfg)
+    finally:
+        env.close()
+
+
 def _start_sde_from(model: Any, path: Path, device: str) -> None:
     """A gSDE run from a saved policy: its networks and, from a gSDE policy, its noise; from a
     Gaussian policy (whose log standard deviation has another shape and meaning) this run's
@@ -330,8 +343,13 @@ def _evaluation(eval_env: Any, env: Any, out: Path, cfg: TrainConfig, resumed_at
                 self.evaluations_length = saved["ep_lengths"][keep].tolist()
                 if "successes" in saved.files:
                     self.evaluations_successes = saved["successes"][keep].tolist()
-            if self.evaluations_results:
-                self.best_mean_reward = float(np.max(np.mean(self.evaluations_results, axis=1)))
+                means = np.mean(saved["results"], axis=1)
+            if len(means) and not keep[int(np.argmax(means))]:
+                # best/ holds a model of the training this run redoes: not this run's best. The
+                # next evaluation saves one again.
+                shutil.rmtree(out / "best", ignore_errors=True)
+            elif self.evaluations_results:
+                self.best_mean_reward = float(np.max(means[keep]))
 
         def _on_step(self) -> bool:
             go_on = super()._on_step()
@@ -406,7 +424,7 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
     from stable_baselines3.common.logger import configure
 
     if cfg.init_model is not None:
-        _check_init_model(cfg)
+        _check_init_model_fits(cfg)
     saved = {**asdict(cfg), "env_options": env_options(cfg.posture_target)}
     if cfg.flat_observation:
         saved["observation_keys"] = _observation_keys(cfg)
@@ -426,7 +444,6 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
     if cfg.normalize:
         env = normalized(env, training=True, reward_gamma=cfg.gamma if cfg.normalize_reward else None)
     eval_env = None
-    refused = False
     try:
         if checkpoint is not None:
             model = _resume_from(checkpoint, env, cfg)
@@ -474,14 +491,7 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
         }
         write_atomic(out / "summary.json", json.dumps(summary, indent=2))
         return summary
-    except InitModelError:
-        # init_model's weights do not fit the network (only building it tells): a new folder made
-        # for this refused run goes, so that the corrected command starts without --overwrite.
-        refused = not run.resumed
-        raise
     finally:
         env.close()
         if eval_env is not None:
             eval_env.close()
-        if refused:
-            shutil.rmtree(out, ignore_errors=True)

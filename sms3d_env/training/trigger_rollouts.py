@@ -55,9 +55,11 @@ from sms3d_env.training.model_files import finished_run, run_settings, save_mode
 
 #: Episodes per label file (and per worker task).
 CHUNK_EPISODES = 20
-#: ``TriggerConfig`` fields a rerun may change: more episodes extend the run (their labels are
-#: collected, the trigger fitted on all), the others say how it is carried out.
-EXTENSIBLE_FIELDS = ("episodes", "workers", "torch_threads")
+#: ``TriggerConfig`` fields a rerun may change: how it is carried out, and more episodes, which
+#: extend the run (their labels are collected, the trigger fitted on all; fewer are refused: they
+#: would replace the larger run's trigger).
+RUN_ONLY_FIELDS = ("workers", "torch_threads")
+EXTENSIBLE_FIELDS = ("episodes",)
 #: The residual wrapper's scale in the saved configuration: a trigger-only residual does not use
 #: it, but ``make_env`` wraps an env only for a positive scale.
 TRIGGER_ONLY_SCALE = 1.0
@@ -270,13 +272,14 @@ def fit_trigger(cfg: TriggerConfig, labels: dict[str, np.ndarray], progress: boo
 def train_trigger(cfg: TriggerConfig, progress: bool = True, overwrite: bool = False) -> dict[str, Any]:
     """Collect (or reuse) the labels, fit the trigger, save ``model.zip``, ``config.json`` and
     ``summary.json`` in ``cfg.out``; returns the summary. ``cfg.out`` is a run folder
-    (``RunFolderError`` for one made with other settings, ``EXTENSIBLE_FIELDS`` aside, unless
-    ``overwrite``); a finished run with these ``episodes`` does nothing."""
+    (``RunFolderError`` for one made with other settings or fewer episodes, ``RUN_ONLY_FIELDS``
+    aside, unless ``overwrite``); a finished run with these ``episodes`` does nothing."""
     import sms3d_env
     from sms3d_env.training.imitation import TRAIN_ENV_ID
     from sms3d_env.training.threads import torch_threads
 
-    run = open_run_folder(cfg.out, run_settings(asdict(cfg)), overwrite=overwrite, may_change=EXTENSIBLE_FIELDS)
+    run = open_run_folder(cfg.out, run_settings(asdict(cfg)), overwrite=overwrite, may_change=RUN_ONLY_FIELDS,
+                          may_grow=EXTENSIBLE_FIELDS)
     out = run.path
     if run.resumed:
         finished = finished_run(out, episodes=cfg.episodes)

@@ -34,6 +34,13 @@ def test_other_settings_are_refused_naming_each_field_and_nothing_changes(tmp_pa
     assert (tmp_path / SETTINGS_FILE).read_bytes() == before
 
 
+def test_a_growing_field_may_grow_but_not_shrink(tmp_path):
+    open_run_folder(tmp_path, {"episodes": 5}, may_grow=("episodes",))
+    assert open_run_folder(tmp_path, {"episodes": 8}, may_grow=("episodes",)).resumed
+    with pytest.raises(RunFolderError, match=r"episodes \(8 → 3: it may only grow\)"):
+        open_run_folder(tmp_path, {"episodes": 3}, may_grow=("episodes",))
+
+
 def test_overwrite_starts_anew(tmp_path):
     open_run_folder(tmp_path, {"lr": 1e-3})
     (tmp_path / "model.zip").write_bytes(b"old")

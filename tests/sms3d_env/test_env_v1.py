@@ -130,3 +130,24 @@ def test_async_vector_envs_are_seeded_and_close_their_workers():
         np.testing.assert_array_equal(a[key], b[key])
     assert len({tuple(row) for row in a["target_pose"]}) == 4  # four different beds
     assert multiprocessing.active_children() == []
+
+
+def test_the_gantry_pressing_into_the_soil_at_full_speed_stays_below_the_bruising_force():
+    corner = SceneConfig().replace(placement__num_mushrooms=1, placement__x_range=(0.15, 0.18),
+                                   placement__y_range=(0.15, 0.18))
+    env = gym.make("SMS3DPick-v1", scene_config=corner)
+    env.reset(seed=0)
+    u = env.unwrapped
+    lift = u.model.actuator("gantry/act_lift_z").id
+    down = np.array([0, 0, -1, 0, 0, 0, 0], np.float32)
+    forces = [abs(env.step(down) and u.data.actuator_force[lift]) for _ in range(120)]
+    assert u.data.site_xpos[u.world.tool_site][2] < 0.01  # it reached the soil and pushed
+    assert forces[-1] == pytest.approx(u.robot_cfg.lift_force)  # pressing as hard as the lift can
+    assert max(forces) <= u.robot_cfg.lift_force + 1e-9 < u.params.bruise_force
+
+
+def test_v1_refuses_the_jaco_whose_links_collide_with_nothing():
+    from sms3d_env.robot import RobotConfig
+
+    with pytest.raises(ValueError, match="all_links_collide"):
+        gym.make("SMS3DPick-v1", robot=RobotConfig())

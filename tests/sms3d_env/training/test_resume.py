@@ -161,6 +161,8 @@ def test_a_trigger_run_grown_by_more_episodes_labels_the_missing_ones_and_fits_o
     assert train_trigger(grown, progress=False) == summary and "is complete" in capsys.readouterr().out
     with pytest.raises(RunFolderError, match=r"margin \(0.15 → 0.3\)"):
         train_trigger(TriggerConfig(**{**grown.__dict__, "margin": 0.3}), progress=False)
+    with pytest.raises(RunFolderError, match=r"episodes \(3 → 2: it may only grow\)"):  # would replace it
+        train_trigger(cfg, progress=False)
     assert (tmp_path / "model.zip").read_bytes() == model
 
 
@@ -168,3 +170,24 @@ def test_a_trigger_run_grown_by_more_episodes_labels_the_missing_ones_and_fits_o
 def test_train_trigger_refuses_an_empty_out(out, capsys):
     assert main(["train-trigger", "--out", out, "--episodes", "1"]) == 2
     assert "--out must name a folder" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("best_at", [100, 200])
+def test_a_resume_drops_a_best_model_of_the_training_it_redoes(tmp_path, best_at):
+    import gymnasium as gym
+
+    from sms3d_env.training.rl import _evaluation
+
+    (tmp_path / "eval").mkdir()
+    means = {100: [5.0, 1.0], 200: [1.0, 5.0]}[best_at]
+    np.savez(tmp_path / "eval" / "evaluations.npz", timesteps=np.array([100, 200]),
+             results=np.array([[means[0]], [means[1]]]), ep_lengths=np.array([[10], [10]]))
+    (tmp_path / "best").mkdir()
+    (tmp_path / "best" / "best_model.zip").write_bytes(b"model")
+    cfg = TrainConfig(out=str(tmp_path), eval_freq=100)
+    callback = _evaluation(gym.make("CartPole-v1"), None, tmp_path, cfg, resumed_at=150)
+    assert callback.evaluations_timesteps == [100]
+    if best_at == 100:  # the best model predates the checkpoint: kept, and the bar to beat stays
+        assert (tmp_path / "best" / "best_model.zip").is_file() and callback.best_mean_reward == 5.0
+    else:  # saved after it, by training this run redoes: gone, the next evaluation saves anew
+        assert not (tmp_path / "best").exists() and callback.best_mean_reward == -np.inf

@@ -517,11 +517,18 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     with pytest.raises(InitModelError, match="normalize=True"):
         train_policy(TrainConfig(**{**again.__dict__, "normalize": False}))
     assert not (tmp_path / "second").exists()
-    # Weights that do not fit the network are found only once it is built, inside the new run
-    # folder: the refusal removes it, so the corrected command needs no --overwrite.
+    # Weights that do not fit the network are found by building it before the run folder is
+    # opened: nothing is written, and with --overwrite the old run survives the refusal.
     with pytest.raises(InitModelError, match="does not fit"):
         train_policy(TrainConfig(**{**again.__dict__, "net_arch": (64, 64)}))
     assert not (tmp_path / "second").exists()
+    earlier = tmp_path / "earlier"  # a run folder that --overwrite would empty
+    earlier.mkdir()
+    (earlier / "run_settings.json").write_text("{}")
+    (earlier / "model.zip").write_bytes(b"old")
+    with pytest.raises(InitModelError, match="does not fit"):
+        train_policy(TrainConfig(**{**again.__dict__, "out": str(earlier), "net_arch": (64, 64)}), overwrite=True)
+    assert (earlier / "model.zip").read_bytes() == b"old"
     with pytest.raises(ValueError, match="init_model"):
         TrainConfig(algo="sac", init_model=str(checkpoint))
 
