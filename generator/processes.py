@@ -16,6 +16,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -111,12 +112,17 @@ def kill_tree_on_exit(roots: Iterable[int], interval: float = 0.5) -> None:
     write end this process never closes (the kernel does, when it ends) and no child inherits."""
     if not sys.platform.startswith("linux"):
         return
+    roots = list(roots)
     read_end, _write_end = os.pipe()  # both close-on-exec; the write end is left open on purpose
-    os.posix_spawn(sys.executable, [sys.executable, "-m", "generator.processes", str(interval), *map(str, roots)],
-                   os.environ, file_actions=[(os.POSIX_SPAWN_DUP2, read_end, 0),
-                                             (os.POSIX_SPAWN_OPEN, 1, os.devnull, os.O_WRONLY, 0),
-                                             (os.POSIX_SPAWN_OPEN, 2, os.devnull, os.O_WRONLY, 0)])
+    pid = os.posix_spawn(sys.executable, [sys.executable, "-m", "generator.processes", str(interval), *map(str, roots)],
+                         os.environ, file_actions=[(os.POSIX_SPAWN_DUP2, read_end, 0),
+                                                   (os.POSIX_SPAWN_OPEN, 1, os.devnull, os.O_WRONLY, 0),
+                                                   (os.POSIX_SPAWN_OPEN, 2, os.devnull, os.O_WRONLY, 0)])
     os.close(read_end)
+    time.sleep(0.2)  # a watchdog that cannot start (no importable package) ends at once: say so
+    if os.waitpid(pid, os.WNOHANG) != (0, 0):
+        warnings.warn(f"the process watchdog ({sys.executable} -m generator.processes) did not start; processes "
+                      f"{list(roots)} may outlive this one", RuntimeWarning, stacklevel=2)
 
 
 def init_ray(num_cpus: int, **init_kwargs: Any) -> None:
