@@ -324,7 +324,7 @@ class SMS3DPickEnv(gym.Env):
         self._disown_renderers()
         self.world = w = build_world(scene, target, self.robot_cfg, self.free_radius,
                                      self.control_dt / self.substeps, self.scene_source.models,
-                                     None if slot is None else (slot, target))
+                                     self._model_key(slot, target))
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
         self.done = False
         m, d = w.model, w.data
@@ -393,6 +393,14 @@ class SMS3DPickEnv(gym.Env):
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
             mujoco.mj_forward(m, d)
         return self._obs(), reward, terminated, truncated, info
+
+    def _model_key(self, slot: int | None, target: int) -> tuple[int, int | None] | None:
+        """The compiled-model cache key of a pool bed: its slot and, where only the mushrooms near
+        the target are free (``free_radius``), the target; with every mushroom free the model is
+        the same whatever the target, so one model serves every target of the bed."""
+        if slot is None:
+            return None
+        return slot, (None if self.free_radius is None else target)
 
     def set_pregrasp_start(self, share: float) -> None:
         """Change ``pregrasp_start`` (a probability in [0, 1]) from the next reset on."""

@@ -151,3 +151,11 @@ def test_v1_refuses_the_jaco_whose_links_collide_with_nothing():
 
     with pytest.raises(ValueError, match="all_links_collide"):
         gym.make("SMS3DPick-v1", robot=RobotConfig())
+
+
+def test_one_compiled_model_serves_every_target_of_a_pool_bed():
+    # With every mushroom free the world does not depend on the target: a pool bed compiles once.
+    env = gym.make("SMS3DPick-v1", scene_config=SMALL, scene_pool=1)
+    targets = {env.reset(seed=s, options={"target": k})[1]["target"] for s, k in enumerate(range(4))}
+    assert targets == {0, 1, 2, 3}
+    assert len(env.unwrapped.scene_source.models) == 1
