@@ -1,8 +1,10 @@
-"""Speed of SMS3DPick-v0: env steps/s (state observations, 50 mushrooms), reset time, and
-steps/s with 64 x 64 RGB-D observations; SMS3DPickTrain-v0's reset with and without a scene pool. Anchor: FetchPickAndPlace-v4 ~1,100 steps/s here
-(measure it beside this run with bench_fetch.py).
+"""Speed of SMS3DPick-v1 (or ``--version v0``): env steps/s with random actions and the
+registered 250-step time limit, so the resets it triggers are in the rate (state observations,
+50 mushrooms), reset time, and steps/s with 64 x 64 RGB-D observations; the training id's reset
+with and without a scene pool. Anchor: FetchPickAndPlace-v4 (measure it beside this run with
+bench_fetch.py).
 
-Usage: python benchmarks/bench_env.py [--steps 500]
+Usage: python benchmarks/bench_env.py [--steps 500] [--version v1]
 """
 
 from __future__ import annotations
@@ -19,9 +21,9 @@ import generator  # noqa: E402
 import sms3d_env  # noqa: E402, F401
 
 
-def measure(steps: int, image_obs: bool, n: int) -> tuple[float, float]:
+def measure(env_id: str, steps: int, image_obs: bool, n: int) -> tuple[float, float]:
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
-    env = gym.make("SMS3DPick-v0", scene_config=cfg, image_obs=image_obs).unwrapped
+    env = gym.make(env_id, scene_config=cfg, image_obs=image_obs)  # with its time limit
     t = time.perf_counter()
     resets = 3
     for s in range(resets):
@@ -44,27 +46,29 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=500)
     ap.add_argument("--mushrooms", type=int, default=50)
     ap.add_argument("--resets", type=int, default=20)
+    ap.add_argument("--version", choices=("v1", "v0"), default="v1")
     args = ap.parse_args()
+    env_id, train_id = f"SMS3DPick-{args.version}", f"SMS3DPickTrain-{args.version}"
     rows = []
-    rate, reset_s = measure(args.steps, False, args.mushrooms)
+    rate, reset_s = measure(env_id, args.steps, False, args.mushrooms)
     rows.append(("state obs", rate, reset_s))
-    rate_i, reset_i = measure(max(50, args.steps // 5), True, args.mushrooms)
+    rate_i, reset_i = measure(env_id, max(50, args.steps // 5), True, args.mushrooms)
     rows.append(("state + 64x64 RGB-D", rate_i, reset_i))
-    print(f"SMS3DPick-v0, {args.mushrooms} mushrooms, 40 ms/step (20 x 2 ms), random actions")
+    print(f"{env_id}, {args.mushrooms} mushrooms, 40 ms/step (20 x 2 ms), random actions, resets included")
     print(f"{'observation':<22}{'steps/s':>10}{'reset (s)':>12}")
     for name, r, rs in rows:
         print(f"{name:<22}{r:>10.0f}{rs:>12.3f}")
-    print("anchor: FetchPickAndPlace-v4 ~1,100 steps/s (state); measure it here with bench_fetch.py")
-    print(f"\nSMS3DPickTrain-v0 reset, {args.mushrooms} mushrooms, {args.resets} resets after a warm-up")
+    print("anchor: FetchPickAndPlace-v4 (state); measure it here with bench_fetch.py")
+    print(f"\n{train_id} reset, {args.mushrooms} mushrooms, {args.resets} resets after a warm-up")
     print(f"{'beds':<34}{'reset (s)':>12}")
     for label, kw in (("new bed per reset", {}), ("scene_pool=8, target_rule=random", {"scene_pool": 8, "target_rule": "random"})):
-        print(f"{label:<34}{reset_time(args.mushrooms, args.resets, kw):>12.3f}")
+        print(f"{label:<34}{reset_time(train_id, args.mushrooms, args.resets, kw):>12.3f}")
 
 
-def reset_time(n: int, resets: int, kwargs: dict) -> float:
+def reset_time(env_id: str, n: int, resets: int, kwargs: dict) -> float:
     """Mean reset time once a pool (if any) is warm: each of its beds and targets seen once."""
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
-    env = gym.make("SMS3DPickTrain-v0", scene_config=cfg, **kwargs)
+    env = gym.make(env_id, scene_config=cfg, **kwargs)
     for s in range(3 * kwargs.get("scene_pool", 1)):
         env.reset(seed=s)
     t = time.perf_counter()
