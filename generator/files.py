@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -12,20 +13,26 @@ import cv2
 import numpy as np
 
 
-def write_atomic(path: str | Path, data: str | bytes) -> None:
-    """Write ``data`` to a temporary file beside ``path``, then rename it into place; if either
-    fails (a full disk, ``path`` a folder) the temporary file is removed, not left beside it."""
+def write_via_temp(path: str | Path, write: Callable[[Path], Any]) -> None:
+    """``write(temp)`` to a temporary file beside ``path`` (the same suffix, so that writers that
+    add one, numpy's and stable-baselines3's, add none; the process id in its name, so that two
+    processes never share one), then rename it into place. A write killed at any moment leaves
+    the old file or none, never part of one; a failed one leaves no temporary file behind."""
     path = Path(path)
-    tmp = path.with_name(f"{path.name}.tmp{os.getpid()}")
+    tmp = path.with_name(f"{path.stem}.tmp{os.getpid()}{path.suffix}")
     try:
-        if isinstance(data, str):
-            tmp.write_text(data, encoding="utf-8")
-        else:
-            tmp.write_bytes(data)
-        tmp.replace(path)
-    except BaseException:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
         tmp.unlink(missing_ok=True)
-        raise
+
+
+def write_atomic(path: str | Path, data: str | bytes) -> None:
+    """Write ``data`` (text as UTF-8) to ``path`` through :func:`write_via_temp`."""
+    if isinstance(data, str):
+        write_via_temp(path, lambda tmp: tmp.write_text(data, encoding="utf-8"))
+    else:
+        write_via_temp(path, lambda tmp: tmp.write_bytes(data))
 
 
 def save_rgb_png(path: str | Path, image: np.ndarray) -> None:
@@ -39,15 +46,7 @@ def save_rgb_png(path: str | Path, image: np.ndarray) -> None:
 def save_npz_atomic(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
     """``arrays`` and ``meta`` (JSON) written to ``path`` through a temporary file and a rename, so
     that a killed run leaves the old file or none, never half of one."""
-    path = Path(path)
-    # The process id in the name: two runs sharing a cache folder never write the same file.
-    tmp = path.with_name(f"{path.stem}.tmp{os.getpid()}.npz")
-    try:
-        np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_via_temp(path, lambda tmp: np.savez_compressed(tmp, __meta__=np.array(json.dumps(meta)), **arrays))
 
 
 def read_npz_made_with(path: str | Path, meta: dict[str, Any]) -> dict[str, np.ndarray] | None:

@@ -10,13 +10,13 @@ import hashlib
 import math
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 import torch
 
+from generator.files import write_via_temp
 from perception.errors import CheckpointFormatError
 
 
@@ -24,16 +24,7 @@ def atomic_torch_save(obj: Any, path: str | Path) -> None:
     """``torch.save`` to a temporary file in the same folder, then ``os.replace`` it into place."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    os.close(fd)
-    try:
-        torch.save(obj, tmp)
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; checkpoints are ordinary files
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
+    write_via_temp(path, lambda tmp: torch.save(obj, tmp))
 
 
 def read_torch_file(path: str | Path, what: str) -> Any:

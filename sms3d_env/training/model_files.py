@@ -3,22 +3,23 @@ observation statistics of a normalised run as plain arrays (``obs_rms.npz``), ne
 
 Why: SB3's ``model.save`` writes its zip in place, so a run killed while saving left an empty or
 cut ``model.zip`` or checkpoint; and SB3's ``VecNormalize.save`` pickles the whole wrapper, so
-loading the statistics unpickled whatever the file held. :func:`save_via_temp` serves every
-save of a run (final model, best model, checkpoints); :class:`ObservationStats` holds
-``VecNormalize``'s running means and variances, read back with ``allow_pickle=False``.
+loading the statistics unpickled whatever the file held. :func:`save_model` (through
+:func:`generator.files.write_via_temp`) serves every save of a run (final model, best model,
+checkpoints); :class:`ObservationStats` holds ``VecNormalize``'s running means and variances,
+read back with ``allow_pickle=False``.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import zipfile
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from generator.files import write_via_temp
 
 #: The observation statistics beside a normalised run's ``model.zip`` (and ``best/best_model.zip``).
 OBS_STATS_FILE = "obs_rms.npz"
@@ -38,22 +39,9 @@ class PolicyFileError(ValueError):
         return (type(self), (self.path, self.message))
 
 
-def save_via_temp(path: str | Path, write: Callable[[str], Any]) -> None:
-    """``write(temp)`` to a temporary file beside ``path`` (same suffix, so that SB3 and numpy add
-    none), then rename it into place: a save killed at any moment leaves the old file or none,
-    never part of one."""
-    path = Path(path)
-    tmp = path.with_name(f"{path.stem}.tmp{os.getpid()}{path.suffix}")
-    try:
-        write(str(tmp))
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 def save_model(model: Any, path: str | Path) -> None:
     """An SB3 model's ``save`` to ``path`` (a ``.zip``), atomically."""
-    save_via_temp(path, model.save)
+    write_via_temp(path, model.save)
 
 
 @dataclass(frozen=True)
@@ -119,7 +107,7 @@ class ObservationStats:
         meta = {"format": _FORMAT, "keys": None if None in self.obs else list(self.obs), "clip_obs": self.clip_obs,
                 "epsilon": self.epsilon, "norm_reward": self.norm_reward, "clip_reward": self.clip_reward,
                 "gamma": self.gamma}
-        save_via_temp(path, lambda tmp: np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays))
+        write_via_temp(path, lambda tmp: np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays))
 
     @classmethod
     def load(cls, path: str | Path) -> ObservationStats:

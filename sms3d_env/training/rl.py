@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from generator.files import write_atomic
+from generator.files import write_atomic, write_via_temp
 from generator.run_folder import open_run_folder
 from sms3d_env.training.actor import (
     checkpoint_path,
@@ -47,7 +47,6 @@ from sms3d_env.training.model_files import (
     finished_run,
     run_settings,
     save_model,
-    save_via_temp,
 )
 from sms3d_env.training.schedules import WallAwareLinearSchedule, trigger_noise_schedule
 from sms3d_env.training.warmup import critic_warmup
@@ -231,7 +230,7 @@ def _checkpoints(env: Any, folder: Path, cfg: TrainConfig) -> Any:
                 self.next_at = (self.num_timesteps // freq + 1) * freq
                 folder.mkdir(parents=True, exist_ok=True)
                 if cfg.algo == "sac":
-                    save_via_temp(checkpoint_path(folder, cfg.algo, self.num_timesteps, "replay_buffer"),
+                    write_via_temp(checkpoint_path(folder, cfg.algo, self.num_timesteps, "replay_buffer"),
                                   self.model.save_replay_buffer)
                 _save_model_and_stats(self.model, env, cfg.normalize,
                                       checkpoint_path(folder, cfg.algo, self.num_timesteps),
