@@ -18,6 +18,9 @@ from typing import Any
 PICKER_KINDS = ("scripted", "policy", "residual")
 
 
+#: The env the scripted picker acts in (a learned picker acts in the one it was trained on).
+SCRIPTED_ENV_ID = "SMS3DPick-v1"
+
 @dataclass(frozen=True)
 class PickerSpec:
     """``kind`` in ``PICKER_KINDS``; ``path`` the model (None: the shipped policy, or for a
@@ -66,7 +69,7 @@ def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     if spec.kind == "scripted":
         from sms3d_env.pickers.scripted import ScriptedPicker
 
-        env = make_env("SMS3DPick-v0", **env_kwargs)
+        env = make_env(SCRIPTED_ENV_ID, **env_kwargs)
         return env, ScriptedPicker.for_env(env)
     import torch
 

@@ -16,6 +16,7 @@ from generator.files import write_atomic
 from sms3d_env.study import success_map
 from sms3d_env.study.figures import plot_curves, save_figure
 from sms3d_env.study.statistics import (
+    RowAxes,
     TILTED_DEG,
     WITHIN_PP,
     axes,
@@ -27,10 +28,10 @@ from sms3d_env.study.statistics import (
 
 PAPER_ERRORS_DEG = {"SMS3D synthetic (Point Transformer)": 1.67, "SMS3D real (M18K)": 3.68}
 
-CSV_COLUMNS = ("variant", "picker", "tool", "num_mushrooms", "source", "error_deg", "position_error_mm",
+CSV_COLUMNS = ("variant", "picker", "robot", "tool", "num_mushrooms", "source", "error_deg", "position_error_mm",
                "axis_error_deg", "cap_top_error_mm", "seed", "target", "reachable", "success",
                "failure_cause", "tilt_deg", "cap_diameter", "nn_distance", "steps", "return", "neighbours_disturbed",
-               "bruised", "target_detached")
+               "bruised", "target_detached", "time_s")
 
 
 def write_csv(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
@@ -152,23 +153,24 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
     return "\n".join(lines) + "\n"
 
 
-def base_slice(rows: Sequence[dict[str, Any]]) -> tuple[str, int, float]:
-    """The (tool, bed size, position error) of the 1-D report: the first tool and bed size, the
-    smallest position error."""
+def base_slice(rows: Sequence[dict[str, Any]]) -> RowAxes:
+    """The axes of the 1-D report: the first robot, tool and bed size, the smallest position error."""
     noisy = [axes(r) for r in rows if r.get("source", "noisy") == "noisy"] or [axes(r) for r in rows]
-    tool, size = noisy[0][0], noisy[0][1]
-    return tool, size, min(p for t, n, p in noisy if (t, n) == (tool, size))
+    panel = noisy[0].panel
+    return RowAxes(*panel, min(a.position_error_mm for a in noisy if a.panel == panel))
 
 
 def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str = "") -> dict[str, Path]:
     """CSV (every row), PNG and Markdown summary into ``out``; returns their paths. The curve
     and its summary are those of ``base_slice``; a sweep over position errors adds the success
-    map (``sweep_map.png``), one over tools or bed sizes their slices (``sweep_slices.png``), and
+    map per robot, tool and bed size (``sweep_map.png`` for the first, ``sweep_map_<panel>.png``
+    for the others), one over robots, tools or bed sizes their slices (``sweep_slices.png``), and
     the summary states the tolerance region (:mod:`sms3d_env.study.success_map`). Each file is replaced
     atomically; if any of them fails, none is left (see below)."""
     out = Path(out)
-    tool, size, position = base_slice(rows)
-    base = [r for r in rows if axes(r)[:2] == (tool, size) and (r.get("source") == "perception" or axes(r)[2] == position)]
+    first = base_slice(rows)
+    panel = [r for r in rows if axes(r).panel == first.panel]
+    base = [r for r in panel if r.get("source") == "perception" or axes(r) == first]
     perception = perception_point(base)
     paths = {"csv": out / "sweep.csv", "png": out / "sweep.png", "md": out / "summary.md",
              "map": out / "sweep_map.png", "slices": out / "sweep_slices.png"}
@@ -176,16 +178,20 @@ def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str =
         write_csv(rows, paths["csv"])
         plot_sweep(base, paths["png"], perception)
         text = summarise(base, command, perception)
-        if len({axes(r)[2] for r in rows if axes(r)[:2] == (tool, size)}) > 1:
-            success_map.plot_map([r for r in rows if axes(r)[:2] == (tool, size)], paths["map"])
-            text += success_map.region_summary([r for r in rows if axes(r)[:2] == (tool, size)])
-        else:
-            paths["map"].unlink(missing_ok=True)
-        if len({axes(r)[:2] for r in rows}) > 1:
+        paths["map"].unlink(missing_ok=True)
+        for key, group in success_map.panels(rows).items():
+            if len({axes(r).position_error_mm for r in group}) > 1:
+                # The first panel's map keeps the historic name; the others are named by panel.
+                path = paths["map"] if key == first.panel else out / f"sweep_map_{success_map.panel_slug(key)}.png"
+                paths[f"map {success_map.panel_label(key)}"] = path
+                success_map.plot_map(group, path, success_map.panel_label(key))
+                text += success_map.region_summary(group, success_map.panel_label(key))
+        if len(success_map.panels(rows)) > 1:
             success_map.plot_slices(rows, paths["slices"])
             text += success_map.slices_summary(rows)
         else:
             paths["slices"].unlink(missing_ok=True)
+        text += success_map.cycle_time_summary(rows)
         write_atomic(paths["md"], text)
     except BaseException:
         # Files of an earlier report beside this one's would be read as describing these rows.

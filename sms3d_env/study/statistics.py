@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -32,11 +32,29 @@ def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float,
     return (min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half)))
 
 
-def axes(row: dict[str, Any]) -> tuple[str, int, float]:
-    """A row's (tool, bed size, cap-top position error in mm): the sweep's axes besides the
-    orientation error and the physics variant (rows of earlier sweeps: suction, 25, 0)."""
-    return (row.get("tool", "suction"), int(row.get("num_mushrooms", 25)),
-            float(row.get("position_error_mm", 0.0)))
+class RowAxes(NamedTuple):
+    """A row's place on the sweep's axes besides the orientation error and the physics variant."""
+
+    robot: str
+    tool: str
+    num_mushrooms: int
+    position_error_mm: float
+
+    @property
+    def panel(self) -> tuple[str, str, int]:
+        """(robot, tool, bed size): the rows that share one 1-D curve and one 2-D map."""
+        return self.robot, self.tool, self.num_mushrooms
+
+
+#: The robot of rows recorded before the robot was an axis: SMS3DPick-v0's Jaco.
+V0_ROBOT = "jaco-v0"
+
+
+def axes(row: dict[str, Any]) -> RowAxes:
+    """A row's robot, tool, bed size and cap-top position error (mm); rows of earlier sweeps
+    hold only some of them (``V0_ROBOT``, suction, 25 mushrooms, 0 mm)."""
+    return RowAxes(row.get("robot", V0_ROBOT), row.get("tool", "suction"), int(row.get("num_mushrooms", 25)),
+                   float(row.get("position_error_mm", 0.0)))
 
 
 def mcnemar_p(a: Sequence[bool], b: Sequence[bool]) -> float:
@@ -51,11 +69,11 @@ def mcnemar_p(a: Sequence[bool], b: Sequence[bool]) -> float:
 
 def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]], bool] = lambda r: True) -> list[dict[str, Any]]:
     """Success rate with its interval and failure-cause counts per (variant, position error,
-    orientation error), for rows of one tool and bed size."""
+    orientation error), for rows of one panel (robot, tool and bed size)."""
     groups: dict[tuple[str, float, float], list[dict[str, Any]]] = {}
     for r in rows:
         if r["reachable"] and r.get("source", "noisy") == "noisy" and keep(r):
-            groups.setdefault((r["variant"], axes(r)[2], r["error_deg"]), []).append(r)
+            groups.setdefault((r["variant"], axes(r).position_error_mm, r["error_deg"]), []).append(r)
     table = []
     for (variant, position, error), group in sorted(groups.items()):
         wins = sum(r["success"] for r in group)
@@ -103,3 +121,13 @@ def crowded_threshold(rows: Sequence[dict[str, Any]]) -> float:
     """Nearest-neighbour distance below which a target counts as crowded: the lowest quartile."""
     distances = [r["nn_distance"] for r in rows if math.isfinite(r["nn_distance"])]
     return float(np.percentile(distances, 25)) if distances else math.inf
+
+
+def cycle_time(rows: Sequence[dict[str, Any]]) -> tuple[float, float, int]:
+    """Median and 90th percentile (s) of the simulated time from reset to lift over the
+    successful rows that record it, and how many there were (NaN, NaN, 0 without any)."""
+    times = [float(r["time_s"]) for r in rows if r.get("success") and r.get("time_s") is not None]
+    if not times:
+        return math.nan, math.nan, 0
+    return float(np.median(times)), float(np.percentile(times, 90)), len(times)
+

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from sms3d_env.study.figures import plot_curves, save_figure
-from sms3d_env.study.statistics import TILTED_DEG, WITHIN_PP, axes, crowded_threshold, success_table
+from sms3d_env.study.statistics import TILTED_DEG, WITHIN_PP, axes, crowded_threshold, cycle_time, success_table
 
 ISO_POINTS = (2.0, 5.0, 10.0)  # iso-lines of the map: oracle success minus these many points
 
@@ -75,12 +75,12 @@ def _perception_cloud(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             and r.get("cap_top_error_mm") is not None]
 
 
-def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, variant: str | None = None) -> None:
+def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, panel: str = "", variant: str | None = None) -> None:
     """Heat map of success over (orientation error, cap-top error), each cell labelled with its
     success and 95 % half-width, iso-lines at the oracle minus 2, 5 and 10 points, and the
     perception source's measured (axis, cap-top) errors as a cloud with its own success.
-    ``variant``: the physics variant drawn (default: "default" if the sweep ran it, else its
-    first)."""
+    ``panel``: the robot, tool and bed size the rows share, for the title; ``variant``: the
+    physics variant drawn (default: "default" if the sweep ran it, else its first)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -113,10 +113,12 @@ def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, variant: str | No
         picked = np.array([r["success"] for r in cloud], bool)
         ax.scatter(x[picked], y[picked], s=12, c="k", marker="o", label="perception: picked")
         ax.scatter(x[~picked], y[~picked], s=24, c="m", marker="x", label="perception: missed")
-        ax.set_title(f"Success (%, ± 95 % half-width); perception {100 * picked.mean():.0f} % of {len(cloud)}")
+        ax.set_title(f"{panel + ': ' if panel else ''}success (%, ± 95 % half-width); perception "
+                     f"{100 * picked.mean():.0f} % of {len(cloud)}")
         ax.legend(fontsize=7, loc="upper right")
     else:
-        ax.set_title(f"Pick success (%, ± 95 % half-width) over orientation × cap-top error ({variant})")
+        ax.set_title(f"{panel + ': p' if panel else 'P'}ick success (%, ± 95 % half-width) over orientation × "
+                     f"cap-top error ({variant})")
     ax.set_xticks(range(len(e)), [f"{v:g}" for v in e])
     ax.set_yticks(range(len(p)), [f"{v:g}" for v in p])
     ax.set_xlabel("orientation error θ (degrees, perpendicular to the stem)")
@@ -127,27 +129,45 @@ def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, variant: str | No
 
 
 def plot_slices(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
-    """Success vs orientation error (no position error, default physics), one line per (tool,
-    bed size) that the sweep ran."""
+    """Success vs orientation error (no position error, default physics), one line per (robot,
+    tool, bed size) that the sweep ran."""
     curves = {}
-    for tool, size in sorted({axes(r)[:2] for r in rows}):
-        table = [t for t in success_table([r for r in rows if axes(r)[:2] == (tool, size)])
-                 if t["variant"] == "default" and t["position_error_mm"] == 0.0]
+    for key, group in panels(rows).items():
+        table = [t for t in success_table(group) if t["variant"] == "default" and t["position_error_mm"] == 0.0]
         if table:
-            curves[f"{tool}, {size} mushrooms"] = table
-    plot_curves(curves, path, "Slices: success vs orientation error per tool and bed size")
+            curves[panel_label(key)] = table
+    plot_curves(curves, path, "Slices: success vs orientation error per robot, tool and bed size")
 
 
-def region_summary(rows: Sequence[dict[str, Any]]) -> str:
+def panels(rows: Sequence[dict[str, Any]]) -> dict[tuple[str, str, int], list[dict[str, Any]]]:
+    """The rows grouped by (robot, tool, bed size), in sorted order."""
+    groups: dict[tuple[str, str, int], list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault(axes(r).panel, []).append(r)
+    return dict(sorted(groups.items()))
+
+
+def panel_label(key: tuple[str, str, int]) -> str:
+    robot, tool, size = key
+    return f"{robot}, {tool}, {size} mushrooms"
+
+
+def panel_slug(key: tuple[str, str, int]) -> str:
+    robot, tool, size = key
+    return f"{robot}_{tool}_n{size}"
+
+
+def region_summary(rows: Sequence[dict[str, Any]], panel: str = "") -> str:
     """Markdown: the tolerance region per physics variant and subset (all, tilted, crowded),
-    and the perception source's measured errors against it."""
+    and the perception source's measured errors against it; ``panel`` names the robot, tool and
+    bed size the rows share."""
     crowded = crowded_threshold(rows)
     subsets = {
         "all reachable targets": lambda r: True,
         f"tilted > {TILTED_DEG:g}°": lambda r: r["tilt_deg"] > TILTED_DEG,
         f"crowded (nearest neighbour < {1000 * crowded:.0f} mm)": lambda r: r["nn_distance"] < crowded,
     }
-    lines = ["", "## The tolerance region (orientation × cap-top position error)", "",
+    lines = ["", f"## The tolerance region (orientation × cap-top position error){': ' + panel if panel else ''}", "",
              "| physics | subset | region | episodes per cell |", "| --- | --- | --- | --- |"]
     for variant in dict.fromkeys(r["variant"] for r in rows if r.get("source", "noisy") == "noisy"):
         for label, keep in subsets.items():
@@ -171,15 +191,31 @@ def region_summary(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def slices_summary(rows: Sequence[dict[str, Any]]) -> str:
-    """Markdown: success per orientation error for every (tool, bed size), no position error."""
-    lines = ["", "## Slices per tool and bed size (no position error, default physics)", "",
-             "| tool | mushrooms | " + " | ".join(f"{e:g}°" for e in sorted({r['error_deg'] for r in rows
+    """Markdown: success per orientation error for every (robot, tool, bed size), no position error."""
+    lines = ["", "## Slices per robot, tool and bed size (no position error, default physics)", "",
+             "| robot | tool | mushrooms | " + " | ".join(f"{e:g}°" for e in sorted({r['error_deg'] for r in rows
                                                                               if r.get('source', 'noisy') == 'noisy'})) + " |"]
     errors = sorted({r["error_deg"] for r in rows if r.get("source", "noisy") == "noisy"})
-    lines.append("| --- | --- |" + " --- |" * len(errors))
-    for tool, size in sorted({axes(r)[:2] for r in rows}):
-        table = {t["error_deg"]: t for t in success_table([r for r in rows if axes(r)[:2] == (tool, size)])
+    lines.append("| --- | --- | --- |" + " --- |" * len(errors))
+    for (robot, tool, size), group in panels(rows).items():
+        table = {t["error_deg"]: t for t in success_table(group)
                  if t["variant"] == "default" and t["position_error_mm"] == 0.0}
         cells = [f"{100 * table[e]['success']:.1f} % (n {table[e]['n']})" if e in table else "–" for e in errors]
-        lines.append(f"| {tool} | {size} | " + " | ".join(cells) + " |")
+        lines.append(f"| {robot} | {tool} | {size} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def cycle_time_summary(rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown: the cycle time (reset to lift, simulated) of the successful picks per robot,
+    tool and bed size, at each orientation error (default physics, no position error)."""
+    lines = ["", "## Cycle time of successful picks (simulated s from reset to lift: median / 90th percentile)", "",
+             "| robot | tool | mushrooms | error | median | p90 | picks |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    for (robot, tool, size), group in panels(rows).items():
+        base = [r for r in group if r.get("source", "noisy") == "noisy" and r["variant"] == "default"
+                and axes(r).position_error_mm == 0.0]
+        for error in sorted({r["error_deg"] for r in base}):
+            median, p90, n = cycle_time([r for r in base if r["error_deg"] == error])
+            if n:
+                lines.append(f"| {robot} | {tool} | {size} | {error:g}° | {median:.2f} | {p90:.2f} | {n} |")
+    return "\n".join(lines) + "\n" if len(lines) > 4 else ""
+

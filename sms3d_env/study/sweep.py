@@ -26,6 +26,7 @@ from generator.errors import ConfigError
 from generator.files import write_atomic
 from generator.run_folder import check_out_path
 from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.pickers.registry import SCRIPTED_ENV_ID
 from sms3d_env.study.report import write_report
 
 DEFAULT_ERRORS_DEG = (0.0, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0)
@@ -53,6 +54,7 @@ class SweepConfig:
     position_errors_mm: tuple[float, ...] = (0.0,)  # exact cap-top offsets of the noisy source
     position_along_axis: bool = False  # offsets along the estimated axis instead of across it
     tools: tuple[str, ...] = ("suction",)
+    robots: tuple[str, ...] = ("gantry",)  # SMS3DPick-v1's robots (sms3d_env.robots.ROBOTS)
     variants: tuple[str, ...] = ("default",)
     perception_episodes: int = 0  # episodes with the perception pose source (default physics)
     perception_detector: str = "shipped"  # stage 1 of the perception episodes: "shipped", "oracle" or a path
@@ -74,6 +76,7 @@ class SweepConfig:
         object.__setattr__(self, "num_mushrooms", sizes)
         object.__setattr__(self, "position_errors_mm", tuple(float(e) for e in self.position_errors_mm))
         object.__setattr__(self, "tools", tuple(self.tools))
+        object.__setattr__(self, "robots", tuple(self.robots))
         if not self.position_errors_mm or any(not math.isfinite(e) or not 0 <= e <= 100
                                               for e in self.position_errors_mm):
             raise ConfigError("position_errors_mm", f"must be distances in [0, 100] mm, got {self.position_errors_mm!r}")
@@ -81,6 +84,10 @@ class SweepConfig:
 
         if not self.tools or any(t not in TOOLS for t in self.tools):
             raise ConfigError("tools", f"must be among {TOOLS}, got {self.tools!r}")
+        from sms3d_env.robots import ROBOTS
+
+        if not self.robots or any(r not in ROBOTS for r in self.robots) or len(set(self.robots)) < len(self.robots):
+            raise ConfigError("robots", f"must be distinct names among {ROBOTS}, got {self.robots!r}")
         if not sizes or any(isinstance(n, bool) or not isinstance(n, int) for n in sizes):
             raise ConfigError("placement.num_mushrooms", f"must be integers, got {self.num_mushrooms!r}")
         for name, least in (("episodes", 1), ("chunk", 1), ("perception_episodes", 0), ("seed", 0)):
@@ -109,6 +116,7 @@ class Task:
     position_error_mm: float = 0.0
     tool: str = "suction"
     num_mushrooms: int = 25
+    robot: str = "gantry"
 
     @property
     def name(self) -> str:
@@ -117,7 +125,8 @@ class Task:
         error = "perception" if self.source == "perception" else f"e{self.error_deg:g}"
         extra = (f"_p{self.position_error_mm:g}mm" if self.position_error_mm else "") + \
             (f"_{self.tool}" if self.tool != "suction" else "") + \
-            (f"_n{self.num_mushrooms}" if self.num_mushrooms != 25 else "")
+            (f"_n{self.num_mushrooms}" if self.num_mushrooms != 25 else "") + \
+            (f"_{self.robot}" if self.robot != "gantry" else "")
         return f"{self.variant}_{error}{extra}_s{self.episode_seeds[0]}-{self.episode_seeds[-1]}"
 
 
@@ -128,12 +137,12 @@ def _chunks(first: int, count: int, size: int) -> list[tuple[int, ...]]:
 
 def plan_tasks(config: SweepConfig) -> list[Task]:
     chunks = _chunks(config.seed, config.episodes, config.chunk)
-    tasks = [Task(v, e, c, "noisy", p, tool, n) for tool in config.tools for n in config.num_mushrooms
-             for v in config.variants for p in config.position_errors_mm for e in config.errors_deg
-             for c in chunks]
+    tasks = [Task(v, e, c, "noisy", p, tool, n, robot) for robot in config.robots for tool in config.tools
+             for n in config.num_mushrooms for v in config.variants for p in config.position_errors_mm
+             for e in config.errors_deg for c in chunks]
     perception = _chunks(config.seed, config.perception_episodes, config.chunk)
-    return tasks + [Task("default", math.nan, c, "perception", 0.0, tool, n) for tool in config.tools
-                    for n in config.num_mushrooms for c in perception]
+    return tasks + [Task("default", math.nan, c, "perception", 0.0, tool, n, robot) for robot in config.robots
+                    for tool in config.tools for n in config.num_mushrooms for c in perception]
 
 
 def target_features(scene: Any, target: int) -> dict[str, float]:
@@ -164,7 +173,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     tool = {} if task.tool == "suction" else {"tool": task.tool}  # the picker's env may fix it
     env, picker = make_picker_env(
         spec, scene_config=SceneConfig().replace(placement__num_mushrooms=task.num_mushrooms),
-        pose_source=source, physics=physics, **tool, **config.env_kwargs,
+        pose_source=source, physics=physics, robot=task.robot, **tool, **config.env_kwargs,
     )
     rows = []
     try:
@@ -176,7 +185,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
             rows.append({
                 "variant": task.variant, "picker": spec.label, "source": task.source,
                 "error_deg": task.error_deg, "position_error_mm": task.position_error_mm,
-                "tool": task.tool, "num_mushrooms": task.num_mushrooms,
+                "robot": task.robot, "tool": task.tool, "num_mushrooms": task.num_mushrooms,
                 "axis_error_deg": axis_error, "cap_top_error_mm": cap_top_error, **result,
                 **target_features(env.unwrapped.scene, result["target"]),
             })
@@ -193,12 +202,14 @@ def _run_and_save(task: Task, config: SweepConfig, parts: Path) -> str:
 
 # Settings that change what a part file holds without changing its name: a folder's parts can
 # only be reused by a sweep that agrees on them (errors, episodes and variants may grow).
-RESUME_KEYS = ("seed", "chunk", "env_kwargs", "picker", "picker_sha256", "position_along_axis")
+RESUME_KEYS = ("env_id", "seed", "chunk", "env_kwargs", "picker", "picker_sha256", "position_along_axis")
 # The same for the perception parts alone (the pose-error parts never see a camera), plus the
 # digest of the pose weights when the sweep asks for perception episodes.
 PERCEPTION_RESUME_KEYS = ("perception_detector", "perception_realism")
+# The env generation a sweep's rows come from: parts made on another (v0's ghost Jaco) are not reused.
+SWEEP_ENV_ID = SCRIPTED_ENV_ID
 # What a folder recorded before a key existed (its parts were made with this value).
-_RESUME_DEFAULTS = {"picker": "scripted", "picker_sha256": None, "position_along_axis": False,
+_RESUME_DEFAULTS = {"env_id": "SMS3DPick-v0", "picker": "scripted", "picker_sha256": None, "position_along_axis": False,
                     "perception_realism": False}
 
 
@@ -238,7 +249,7 @@ def _settings(config: SweepConfig) -> dict[str, Any]:
     """What ``sweep_config.json`` records: the config, the pose weights behind perception parts
     and the learned picker's files."""
     digest = _pose_weights_digest(config) if config.perception_episodes else None
-    return json.loads(json.dumps({**dataclasses.asdict(config), "pose_weights_sha256": digest,
+    return json.loads(json.dumps({**dataclasses.asdict(config), "env_id": SWEEP_ENV_ID, "pose_weights_sha256": digest,
                                   "picker_sha256": _picker_digests(config)}, default=str))
 
 
@@ -358,7 +369,7 @@ def _cmd_sweep(args: Any) -> int:
             num_mushrooms=args.num_mushrooms, variants=tuple(args.variants), chunk=args.chunk,
             perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
             perception_realism=args.perception_realism, picker=args.picker, position_errors_mm=tuple(args.position_errors_mm),
-            position_along_axis=args.position_along_axis, tools=tuple(args.tool),
+            position_along_axis=args.position_along_axis, tools=tuple(args.tool), robots=tuple(args.robot),
             env_kwargs={} if args.posture_target == "estimate" else {"posture_target": args.posture_target},
         )
     except ConfigError as exc:
@@ -444,8 +455,8 @@ def _design(rows: list[dict[str, Any]]) -> dict[str, str]:
     """What must be the same in two sweeps' ``compared_rows`` for their episodes to pair."""
     from sms3d_env.study.statistics import axes
 
-    tool, size, position = axes(rows[0])
-    return {"tool": tool, "bed size": f"{size} mushrooms", "position error": f"{position:g} mm",
+    robot, tool, size, position = axes(rows[0])
+    return {"robot": robot, "tool": tool, "bed size": f"{size} mushrooms", "position error": f"{position:g} mm",
             "errors": ", ".join(f"{e:g}°" for e in sorted({r["error_deg"] for r in rows})),
             "seeds": _spans(sorted({int(r["seed"]) for r in rows})),
             "episodes": f"{len(rows)} (error, seed) pairs"}
@@ -502,7 +513,7 @@ def picker_comparison(curves: dict[str, list[dict[str, Any]]]) -> str:
 
 # The flag that sets each field SweepConfig checks, to report a refused value by what was typed.
 SWEEP_FLAGS = {"errors_deg": "--errors", "episodes": "--episodes", "chunk": "--chunk", "seed": "--seed",
-               "position_errors_mm": "--position-errors-mm", "tools": "--tool",
+               "position_errors_mm": "--position-errors-mm", "tools": "--tool", "robots": "--robot",
                "perception_episodes": "--perception-episodes", "variants": "--variants",
                "placement.num_mushrooms": "--num-mushrooms", "picker": "--picker"}
 
@@ -524,6 +535,9 @@ def register(subparsers: Any) -> None:
                    help="offset the cap top along the estimated axis instead of across it")
     p.add_argument("--tool", nargs="+", default=["suction"], choices=["suction", "hand"],
                    help="tools to sweep (the scripted picker for each)")
+    p.add_argument("--robot", nargs="+", default=list(SweepConfig.robots), choices=["gantry", "jaco"],
+                   help="robots to sweep (SMS3DPick-v1's; several make the robot an axis: a robot column in "
+                        "sweep.csv, a curve and a map per robot)")
     p.add_argument("--backend", choices=BACKENDS, default="process",
                    help="process pool (default) or Ray (same rows)")
     p.add_argument("--variants", nargs="+", default=["default"], choices=sorted(SENSITIVITY_VARIANTS),

@@ -172,6 +172,37 @@ def test_small_sweep_resumes_and_reports(tmp_path):
     assert "Perception pose source" in paths["md"].read_text()
 
 
+def test_robot_is_an_axis_with_a_column_a_curve_and_a_map_per_robot(tmp_path, capsys):
+    config = SweepConfig(errors_deg=(0.0, 30.0), position_errors_mm=(0.0, 5.0), episodes=1, num_mushrooms=8,
+                         robots=("gantry", "jaco"))
+    rows = run_sweep(config, tmp_path, progress=False)
+    assert len(rows) == 8 and {r["robot"] for r in rows} == {"gantry", "jaco"}
+    # Paired across robots: the same seed draws the same bed and target for both.
+    assert len({(r["seed"], r["target"]) for r in rows}) == 1
+    paths = write_report(rows, tmp_path, "sms3d sweep --robot gantry jaco")
+    with open(paths["csv"]) as fh:
+        assert {r["robot"] for r in csv.DictReader(fh)} == {"gantry", "jaco"}
+    summary = paths["md"].read_text()
+    assert "gantry, suction, 8 mushrooms" in summary and "jaco, suction, 8 mushrooms" in summary
+    if any(r["success"] for r in rows):  # the cycle time of the successful picks, per robot
+        assert "## Cycle time" in summary and all(r["time_s"] > 0 for r in rows)
+    assert paths["map"].is_file() and (tmp_path / "sweep_map_jaco_suction_n8.png").is_file()
+    assert paths["slices"].is_file()
+    with pytest.raises(ConfigError) as info:
+        SweepConfig(robots=("gantry", "ur5"))
+    assert info.value.field == "robots"
+    with pytest.raises(SystemExit) as exited:
+        main(["sweep", "--out", str(tmp_path / "bad"), "--robot", "ur5"])
+    assert exited.value.code == 2 and "--robot: invalid choice: 'ur5'" in capsys.readouterr().err
+    # A folder of SMS3DPick-v0 parts (recorded before the env id was) is not resumed by a v1 sweep.
+    record = json.loads((tmp_path / "sweep_config.json").read_text())
+    assert record["env_id"] == "SMS3DPick-v1"
+    del record["env_id"]
+    (tmp_path / "sweep_config.json").write_text(json.dumps(record))
+    with pytest.raises(ValueError, match="env_id: folder has 'SMS3DPick-v0'"):
+        run_sweep(config, tmp_path, progress=False)
+
+
 def test_report_draws_when_every_episode_of_an_error_succeeds(tmp_path):
     # `sms3d sweep --errors 0 --episodes 4 --chunk 4`: 4/4 successes drew a negative error bar.
     paths = write_report(_rows({0.0: 4, 5.0: 3}, n=4), tmp_path)
