@@ -1,7 +1,7 @@
 """Stage-1 and pipeline speed: the shipped RGB-D segmenter and Mask R-CNN (both configurations)
 per 640 x 480 image, and the two-stage pipeline's time per scene (detector + pose network).
 
-Targets (issues): the shipped stage-1 model at most 0.5 s per 640 x 480 image on this CPU;
+Targets: the shipped stage-1 model at most 0.5 s per 640 x 480 image on this CPU;
 Mask R-CNN's light configuration under 1 s. Times are medians
 over ``--repeats`` runs after a warm-up, eval mode, no_grad, on a rendered dataset scene. Network
 weights matter: torchvision runs the mask head on every box scoring over 0.05 (up to 100), which

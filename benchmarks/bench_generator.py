@@ -1,7 +1,7 @@
 """Scene generation speed: geometry + MJCF per scene and MuJoCo compile time (one core).
 
 Run: ``python benchmarks/bench_generator.py [--scenes 5]``. Prints one Markdown table.
-Targets (issue 2): a 100-mushroom scene in under 1 s; compile under 100 ms.
+Targets: a 100-mushroom scene in under 1 s; compile under 100 ms.
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """How much can any picker gain over the scripted one under orientation error? The scripted picker
 given the *true* pose in some of its phases (what a picker that inferred the truth perfectly
-could do), and with a stall escape (what getting out of the IK stalls of session 15 is worth).
+could do), and with a stall escape (what getting out of the approach's IK stalls is worth).
 
-Rows, each on the same seeded episodes (25-mushroom beds, ``posture_target="tool"``, the env of
-the tolerance target of issue 14):
+Rows, each on the same seeded episodes (25-mushroom beds, ``posture_target="tool"``, the env the
+learned pickers are compared in):
 - ``scripted``: the study's picker on the estimate (the reference of the McNemar tests);
 - ``truth: approach``: the true pose while approaching, the estimate from the descent on;
 - ``truth: descend + twist``: the estimate while approaching, the truth from the descent on
@@ -38,7 +38,7 @@ from sms3d_env.pickers.episode import run_episode  # noqa: E402
 from sms3d_env.pickers.registry import PickerSpec, make_picker_env  # noqa: E402
 from sms3d_env.pickers.scripted import ScriptedPicker  # noqa: E402
 from sms3d_env.study.statistics import mcnemar_p, wilson_interval  # noqa: E402
-from sms3d_env.training.imitation import with_true_target  # noqa: E402
+from sms3d_env.training.demonstrations import with_true_target  # noqa: E402
 
 ALL_PHASES = frozenset({"approach", "descend", "settle", "twist", "lift"})
 ROWS = {  # row -> (phases driven by the true pose, stall escape)

@@ -1,9 +1,9 @@
 """PPO training throughput (env steps per wall second) of the from-scratch recipe for each way
 of stepping the envs (``--vec-env``) and each observation layout (``--flat-observation``).
 
-Each row trains the session-15 by-wall recipe's PPO (``SMS3DPickTrain-v0``, observation
-normalisation, pre-grasp starts, 2 envs, rollouts of 1024 steps per env) for ``--steps`` env
-steps with no periodic evaluation or checkpoints, on a small scene pool (``--pool``) that the
+Each row trains the from-scratch recipe's PPO (``SMS3DPickTrain-v0``, observation normalisation,
+pre-grasp starts, a rate falling over the wall clock, 2 envs, rollouts of 1024 steps per env)
+for ``--steps`` env steps with no periodic evaluation or checkpoints, on a small scene pool (``--pool``) that the
 first episodes fill, so that the rate is the steady one of a long run and not bed generation's.
 The rate counts the whole ``train_policy`` call: worker start-up, rollouts and updates.
 

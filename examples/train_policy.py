@@ -3,7 +3,7 @@ with exact poses and under 10 and 30 degrees of pose error.
 
 Usage: python examples/train_policy.py --algo ppo|sac [--steps N] [--n-envs K] [--pose-error-deg 0] [--out DIR]
 
-Time here (2 shared CPU cores, no GPU; benchmarks/RESULTS.md, "Trained pick policies"):
+Time here (2 shared CPU cores, no GPU; measured in benchmarks/RESULTS.md, the measurement log):
 PPO with 2 SubprocVecEnv workers runs at about 240-370 env steps/s, so its default 300k steps
 take about 20 minutes. SAC does a gradient step per env step: about 13 env steps/s once updates
 start, so its default 20k steps take about 25 minutes. Each 30-episode evaluation adds a minute

@@ -45,8 +45,8 @@ def estimate_cap_top(points: np.ndarray, axis: np.ndarray) -> np.ndarray:
     0``, fewer than 10 points, or a peak outside the band's reach) the apex is the centroid of
     the points within ``CAP_TOP_BAND_M`` of the top, raised to it.
 
-    Measured on the 50 held-out 40-mushroom beds of each camera (shipped models;
-    benchmarks/RESULTS.md, session 26), mean distance to the true apex: 8.2 → 6.7 mm with
+    Measured on the 50 held-out 40-mushroom beds of each camera (the shipped segmenter and the
+    point network; docs/results-perception.md), mean distance to the true apex: 8.2 → 6.7 mm with
     ``--realism``, 4.6 → 4.3 mm clean, against the top-band centroid. What remains follows the axis error: a dome's apex
     along a wrong axis is where the surface faces that axis.
     """
@@ -185,13 +185,13 @@ class PosePipeline:
     ``soil_margin_m`` drops mask pixels within that distance of the local soil depth (see
     ``above_soil``; ``None``, the default, keeps masks whole). It helps a pose network trained on
     exact masks that is given learned ones (CPU-trained Mask R-CNN: 34° -> 14° mean stem-axis
-    error; the shipped segmenter with the stage-5 network: 30° -> 10°, 6 mm), but not the shipped
-    network, which was trained on the shipped segmenter's masks (9.5° -> 9.8° clean, and recall
-    0.973 -> 0.944). ``edge_tolerance_m`` drops border pixels deeper than the mask's interior
+    error; the shipped segmenter with a point network trained on exact masks: 30° -> 10°, 6 mm),
+    but not the shipped point network, which was trained on the segmenter's masks (9.5° -> 9.8°
+    clean, and recall 0.973 -> 0.944). ``edge_tolerance_m`` drops border pixels deeper than the mask's interior
     beside them by more than that (``within_depth_of_core``; ``None``, the default, keeps masks
-    whole). Measured on the 50 clean held-out beds at 10 mm (benchmarks/RESULTS.md): it helps
-    fully visible caps (shipped network 6.9° -> 5.0° mean stem-axis error; the stage-5 network,
-    trained on exact masks, 30° -> 8.9° overall) and hurts occluded ones (21.5° -> 23.9° below
+    whole). Measured on the 50 clean held-out beds at 10 mm with point networks: it helps
+    fully visible caps (6.9° -> 5.0° mean stem-axis error; a network trained on exact masks,
+    30° -> 8.9° overall) and hurts occluded ones (21.5° -> 23.9° below
     half visible), 9.0° -> 8.7° in all; under the camera model 15.7° -> 17.7°, so it is off by
     default. ``erode_px`` trims mask borders; it
     is 0 by default because the shipped network was fine-tuned on un-eroded masks (1 px of erosion

@@ -101,6 +101,11 @@ class RobotConfig:
             actuators).
         cup_radius: suction cup radius (m), 10 mm as in docs/physics.md (20 mm cup).
         tube_length: length of the tube between the wrist flange and the cup (m). ASSUMPTION.
+        tool_tilt_deg: the angle between the tool's approach axis and the wrist's last joint
+            axis (deg): 0 an inline tool; 90 a right-angle adapter, which keeps the Jaco's wrist
+            bent (away from its singularity, wrist joints 4 and 6 aligned) while the cup points
+            down. ASSUMPTION: angled suction adapters are common on arm-mounted pickers; no
+            published mushroom harvester with a Jaco sets the angle.
         kp_large, kp_small: position gains of the shoulder/elbow and wrist actuators (N m/rad).
             ASSUMPTION chosen for ~50 ms tracking with the model's armature.
         force_large, force_small: actuator torque limits (N m). ASSUMPTION near Jaco's ratings.
@@ -122,6 +127,7 @@ class RobotConfig:
     tool: Tool = "suction"
     cup_radius: float = 0.010
     tube_length: float = 0.09
+    tool_tilt_deg: float = 0.0
     kp_large: float = 1500.0
     kp_small: float = 500.0
     force_large: float = 40.0
@@ -137,6 +143,9 @@ class RobotConfig:
         check_tool_fields(self)
         if len(self.home_q) != 6:
             raise ValueError(f"{type(self).__name__}.home_q must have 6 entries")
+        if not (isinstance(self.tool_tilt_deg, (int, float)) and 0.0 <= self.tool_tilt_deg <= 90.0):
+            raise ValueError(f"{type(self).__name__}.tool_tilt_deg must be an angle in [0, 90] degrees, "
+                             f"got {self.tool_tilt_deg!r}")
 
     def build_spec(self) -> mujoco.MjSpec:
         return build_arm_spec(self)
@@ -231,8 +240,16 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
         f = cfg.force_large if large else cfg.force_small
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.forcerange = [-f, f]
-    mount_tool(spec, spec.body("b_6"), cfg, JACO_TOOL_QUAT)
+    mount_tool(spec, spec.body("b_6"), cfg, _tilted(JACO_TOOL_QUAT, cfg.tool_tilt_deg))
     return spec
+
+
+def _tilted(tool_quat: tuple[float, ...], tilt_deg: float) -> tuple[float, ...]:
+    """``tool_quat`` turned by ``tilt_deg`` about its own x axis (an angled tool adapter)."""
+    half = np.radians(tilt_deg) / 2
+    quat = np.empty(4)
+    mujoco.mju_mulQuat(quat, np.asarray(tool_quat, float), np.array([np.cos(half), np.sin(half), 0.0, 0.0]))
+    return tuple(float(v) for v in quat)
 
 
 def mount_tool(spec: mujoco.MjSpec, parent: mujoco.MjsBody, cfg: RobotSpec,

@@ -3,7 +3,7 @@
 The mushrooms of one bed share its soil, crowding and camera noise, so their errors are not
 independent, and resampling mushrooms understates a mean's uncertainty: for the shipped axis CNN
 on 50 beds with the camera model ±0.34° against ±0.44° resampling beds, on 300 beds ±0.14°
-against ±0.19° (benchmarks/RESULTS.md, session 31). Resampling scenes with replacement (a
+against ±0.19° (docs/results-perception.md). Resampling scenes with replacement (a
 cluster bootstrap; Davison & Hinkley, *Bootstrap Methods and their Application*, 1997, §3.8)
 keeps that correlation. The statistic is the pooled mean — the sum of the resampled scenes'
 errors over their count — the number `eval-pipeline` reports.

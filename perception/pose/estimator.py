@@ -25,8 +25,8 @@ measured errors).
 so that the first estimate's stem points at the camera, and averages both sets: the network is
 most accurate on near-upright mushrooms, and the turned cloud is a different input whose
 errors partly cancel the first set's. Measured on the shipped weights (8 views): mean stem-axis
-error 2.2° → 2.1° on synthetic views, 4.6–5.4° → 4.4–5.2° on every scene instance (the previous,
-stage-3 weights gained more: 3.1° → 2.7°), for twice the network time.
+error 2.2° → 2.1° on synthetic views, 4.6–5.4° → 4.4–5.2° on every scene instance (an earlier,
+less trained network gained more: 3.1° → 2.7°), for twice the network time.
 
 ``workers=W`` splits a batch into ``W`` parts run in ``W`` threads (torch releases the GIL in
 its kernels). The Point Transformer's CPU kernels are small, so one intra-op thread per worker

@@ -1,7 +1,7 @@
 """Function-preserving widening of a trained axis CNN (Net2WiderNet).
 
-Why: the axis CNN's training loss has settled level with its validation error (benchmarks/
-RESULTS.md, session 30): more data of the same kind no longer helps it, a wider network might.
+Why: the axis CNN's training loss had settled level with its validation error (0.105 rad
+against 6.16°): more data of the same kind no longer helped it, a wider network might.
 Training a wider one from the upright prior costs hours on a CPU; Net2WiderNet (Chen, Goodfellow
 & Shlens, "Net2Net: Accelerating learning via knowledge transfer", ICLR 2016, arXiv:1511.05641)
 starts it from the narrow network's function instead.
