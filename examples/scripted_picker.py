@@ -1,7 +1,9 @@
-"""Run the scripted pose-aware picker once and save an image strip (side camera) as a PNG.
+"""Run the scripted pose-aware picker once and save frames of the pick (the env's pick camera:
+time and phase on each frame, the target ringed, the outcome on the last) as a PNG, and with
+``--video`` the whole pick as MP4 (needs the ``video`` extra).
 
-Usage: python examples/scripted_picker.py [--seed 0] [--pose-error-deg 0] [--tool suction|hand]
-       [--out picker_strip.png]
+Usage: python examples/scripted_picker.py [--seed 0] [--pose-error-deg 0] [--robot gantry|jaco]
+       [--tool suction|hand] [--out picker_strip.png] [--video pick.mp4]
 """
 
 from __future__ import annotations
@@ -19,13 +21,18 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--pose-error-deg", type=float, default=0.0)
+    ap.add_argument("--robot", choices=sms3d_env.ROBOTS, default="gantry")
     ap.add_argument("--tool", choices=sms3d_env.TOOLS, default="suction")
     ap.add_argument("--frames", type=int, default=6)
     ap.add_argument("--out", default="picker_strip.png")
+    ap.add_argument("--video", default=None, help="also write the pick as this MP4")
     args = ap.parse_args()
-    env = gym.make("SMS3DPick-v0", pose_source="noisy", pose_error_deg=args.pose_error_deg,
-                   tool=args.tool, render_mode="rgb_array", camera="side", render_size=(240, 320))
-    strip, info = picker_strip(env, sms3d_env.ScriptedPicker.for_env(env), args.seed, args.frames)
+    env = gym.make("SMS3DPick-v1", pose_source="noisy", pose_error_deg=args.pose_error_deg, robot=args.robot,
+                   tool=args.tool, render_mode="rgb_array", render_size=(240, 320))
+    picker = sms3d_env.ScriptedPicker.for_env(env)  # the hand's picker with the hand
+    title = (f"Scripted picker, SMS3DPick-v1 {args.robot} with the {args.tool} tool, "
+             f"{args.pose_error_deg:g} deg pose error, seed {args.seed}")
+    strip, info = picker_strip(env, picker, args.seed, args.frames, title, args.video)
     save_rgb_png(args.out, strip)
     print(f"success={info['is_success']} cause={info['failure_cause']} -> {args.out}")
     env.close()

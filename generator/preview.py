@@ -1,4 +1,5 @@
-"""Pictures of a scene for people: the overhead camera's view and an oblique view."""
+"""Pictures of a scene for people: the overhead camera's view and an oblique view, each under its
+title, below the scene's own (mushrooms placed, seed)."""
 
 from __future__ import annotations
 
@@ -13,12 +14,14 @@ import mujoco  # noqa: E402
 from generator.config import require_image_side  # noqa: E402
 from generator.files import save_rgb_png  # noqa: E402
 from generator.gl import open_renderer
+from generator.image_text import with_title  # noqa: E402
 from generator.mjcf import scene_to_model  # noqa: E402
 from generator.scene import Scene  # noqa: E402
 
 
 def render_views(scene: Scene, width: int = 640, height: int = 480) -> np.ndarray:
-    """The overhead camera's RGB image beside an oblique view, as one (H, 2W, 3) uint8 image."""
+    """The overhead camera's RGB image beside an oblique view, each under a title bar, below the
+    scene's title, as one (H + bars, 2W, 3) uint8 image."""
     require_image_side("width", width)
     require_image_side("height", height)
     model = scene_to_model(scene, shadows=True)
@@ -34,7 +37,12 @@ def render_views(scene: Scene, width: int = 640, height: int = 480) -> np.ndarra
         top = renderer.render()
         renderer.update_scene(data, camera=oblique)
         side = renderer.render()
-    return np.concatenate([top, side], axis=1)
+    cam = scene.config.camera
+    panels = np.concatenate([
+        with_title(top, f"overhead camera ({cam.preset.upper()}-like, {cam.height_above_soil:g} m above the soil)"),
+        with_title(side, f"oblique view ({oblique.distance:g} m away, {-oblique.elevation:g} deg down)")], axis=1)
+    return with_title(panels, f"Generated bed: {len(scene.instances)} mushrooms "
+                              f"(species: {scene.config.placement.species}), seed {scene.seed}", scale=0.9)
 
 
 def save_preview(scene: Scene, path: str, width: int = 640, height: int = 480) -> None:

@@ -24,7 +24,7 @@ _EXPORTS = {
     "NoisyPose": "pose_sources", "OraclePose": "pose_sources", "PoseEstimate": "pose_sources",
     "PoseSource": "pose_sources", "UniformNoisyPose": "pose_sources", "make_pose_source": "pose_sources",
     "Tool": "tools", "TOOLS": "robot", "RobotConfig": "robot",
-    "GantryConfig": "gantry", "ROBOTS": "robots", "make_robot": "robots",
+    "GantryConfig": "gantry", "ROBOTS": "robot_names", "make_robot": "robots",
     "HandPicker": "pickers.scripted", "ScriptedPicker": "pickers.scripted", "run_episode": "pickers.episode",
 }  # fmt: skip
 

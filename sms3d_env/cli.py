@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "show-estimates": "perception.cli_detector",
     "sweep": "sms3d_env.study.sweep",
     "sweep-compare": "sms3d_env.study.sweep",
+    "record-demos": "sms3d_env.training.cli_demos",
     "train-policy": "sms3d_env.training.cli",
     "train-trigger": "sms3d_env.training.cli",
     "eval-policy": "sms3d_env.training.cli",

@@ -3,7 +3,8 @@
 Generates a seeded bed and renders it, runs the shipped two-stage perception on its overhead
 RGB-D image (a picture of the masks and estimated stem axes), then lets the scripted pose-aware
 picker pick with exact poses, with a 30-degree orientation error and with the poses perception
-estimated from pixels, saving an image strip of each pick.
+estimated from pixels, saving a picture of frames of each pick (captioned: time and phase, the
+target ringed, the outcome) and, with the ``video`` extra installed, its MP4.
 """
 
 from __future__ import annotations
@@ -17,20 +18,33 @@ import numpy as np
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 
-def picker_strip(env: Any, policy: Any, seed: int, frames: int = 6) -> tuple[np.ndarray, dict[str, Any]]:
-    """Run one episode with ``render_mode="rgb_array"`` and return ``frames`` evenly spaced renders
-    side by side, and the final ``info``."""
+def picker_strip(env: Any, policy: Any, seed: int, frames: int = 6, title: str = "",
+                 video: str | Path | None = None, columns: int = 3) -> tuple[np.ndarray, dict[str, Any]]:
+    """Run one episode (``render_mode="rgb_array"``) and return ``frames`` evenly spaced frames in
+    rows of ``columns`` under ``title``, and the final ``info``. Each frame is captioned with the
+    simulated time and the phase (the policy's ``phase`` attribute where it has one, as the
+    scripted pickers do, else what ``info`` shows), the target is ringed, and the last frame
+    states the outcome and its cause (:mod:`sms3d_env.episode_video`). ``video``: also write the
+    whole episode there as MP4 (needs the ``video`` extra)."""
+    from generator.image_text import with_title
+    from sms3d_env.episode_video import EpisodeVideo
+
     obs, info = env.reset(seed=seed)
     if hasattr(policy, "reset"):
         policy.reset()
-    images = [env.render()]
-    done = False
-    while not done:
-        obs, _, terminated, truncated, info = env.step(policy(obs))
-        done = terminated or truncated
-        images.append(env.render())
-    idx = np.linspace(0, len(images) - 1, frames).round().astype(int)
-    return np.concatenate([images[i] for i in idx], axis=1), info
+    with EpisodeVideo(env, video) as recorder:
+        images = [recorder.capture(info, getattr(policy, "phase", None))]
+        done = False
+        while not done:
+            obs, _, terminated, truncated, info = env.step(policy(obs))
+            done = terminated or truncated
+            images.append(recorder.capture(info, getattr(policy, "phase", None), ended=done))
+    chosen = [images[i] for i in np.linspace(0, len(images) - 1, frames).round().astype(int)]
+    blank = np.full_like(chosen[0], 255)
+    chosen += [blank] * (-len(chosen) % columns)
+    rows = [np.concatenate(chosen[k:k + columns], axis=1) for k in range(0, len(chosen), columns)]
+    grid = np.concatenate(rows, axis=0)
+    return (with_title(grid, title) if title else grid), info
 
 
 #: What the demo picks with: a label, the env's pose-source arguments, and the strip's file name.
@@ -43,20 +57,27 @@ PICKS = (
 
 def perception_picture(config: Any, seed: int, path: Path) -> int:
     """Render the bed from the overhead camera, run the shipped two-stage pipeline (RGB-D
-    segmenter, then the axis CNN) and save the masks and estimated stem axes; returns the number
-    of mushrooms estimated."""
+    segmenter, then the axis CNN) and save the masks and estimated stem axes beside every
+    mushroom's true axis, under a title and a legend; returns the number of mushrooms
+    estimated."""
     from generator import generate_scene
     from generator.dataset.render import SceneRenderer
-    from generator.files import save_rgb_png
     from perception.pipeline import PosePipeline
-    from perception.plots.masks_and_axes import draw_masks_and_axes
+    from perception.plots.masks_and_axes import draw_masks_and_axes, save_masks_and_axes_figure
 
     scene = generate_scene(config, seed)
     cam = scene.config.camera
     with SceneRenderer(cam.height, cam.width) as renderer:
         frame = renderer.render(scene, amodal=False)
     estimates = PosePipeline.shipped()(frame.rgb, frame.depth, frame.intrinsics, frame.world_from_camera)
-    save_rgb_png(path, draw_masks_and_axes(frame.rgb, estimates, frame.intrinsics.matrix))
+    rotation, origin = frame.world_from_camera[:3, :3], frame.world_from_camera[:3, 3]
+    truth = [((inst.cap_top - origin) @ rotation, inst.stem_axis @ rotation) for inst in scene.instances]
+    image = draw_masks_and_axes(frame.rgb, estimates, frame.intrinsics.matrix, truth=truth)
+    save_masks_and_axes_figure(
+        image, path, f"Shipped perception on the overhead RGB-D image: {len(estimates)} of "
+                     f"{len(scene.instances)} mushrooms found (bed seed {seed})",
+        estimate_label="estimated stem axis (axis CNN)", truth_label="true stem axis (the scene)",
+        mask_label="segmenter mask")
     return len(estimates)
 
 
@@ -74,9 +95,12 @@ def check_demo_args(out: str | Path, seed: Any, episodes: Any) -> Path:
 
 
 def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -> dict[str, float]:
-    """Write ``scene.png``, ``perception.png`` (stage 1 masks and stage 2 axes) and a picker strip
-    per entry of ``PICKS`` into ``out``; return the success rate of each entry, by label
+    """Write ``scene.png``, ``perception.png`` (stage 1 masks, stage 2 axes and the true axes) and
+    a picker strip per entry of ``PICKS`` into ``out``, with its MP4 beside it when imageio-ffmpeg
+    (the ``video`` extra) is installed; return the success rate of each entry, by label
     (:func:`check_demo_args` checks the arguments first)."""
+    import importlib.util
+
     import gymnasium as gym
     from tqdm.auto import tqdm
 
@@ -94,12 +118,17 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
     print(f"bed of 25 mushrooms rendered: {out / 'scene.png'}")
     found = perception_picture(config, seed, out / "perception.png")
     print(f"from pixels (shipped segmenter + axis CNN): {found} mushrooms estimated: {out / 'perception.png'}")
+    videos = importlib.util.find_spec("imageio_ffmpeg") is not None
+    if not videos:
+        print('no videos: they need imageio-ffmpeg (pip install "sms3d-pick[video]")')
     rates = {}
     for label, source, name in PICKS:
-        env = gym.make("SMS3DPick-v1", scene_config=config, render_mode="rgb_array", camera="side",
-                       render_size=(240, 320), **source)
+        env = gym.make("SMS3DPick-v1", scene_config=config, render_mode="rgb_array", render_size=(240, 320),
+                       **source)
         picker = ScriptedPicker.for_env(env)
-        strip, info = picker_strip(env, picker, seed)
+        video = out / Path(name).with_suffix(".mp4") if videos else None
+        strip, info = picker_strip(env, picker, seed, video=video,
+                                   title=f"Scripted picker, SMS3DPick-v1 gantry, {label}, seed {seed}")
         save_rgb_png(out / name, strip)
         results = [run_episode(env, picker, seed + k) for k in tqdm(range(episodes), desc=f"picking, {label}")]
         env.close()
@@ -107,7 +136,8 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
         rates[label] = float(np.mean([r["success"] for r in reachable])) if reachable else float("nan")
         causes = sorted({r["failure_cause"] for r in reachable if not r["success"]})
         print(f"{label:>18}: {sum(r['success'] for r in reachable)}/{len(reachable)} reachable targets picked"
-              f"{'; failures: ' + ', '.join(causes) if causes else ''}; strip: {out / name}")
+              f"{'; failures: ' + ', '.join(causes) if causes else ''}; strip: {out / name}"
+              f"{f', video: {video}' if video else ''}")
     return rates
 
 

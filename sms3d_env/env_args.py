@@ -1,5 +1,5 @@
 """Argument checks of ``SMS3DPickEnv``: refuse what the env could not honour or would silently
-ignore, with a ``ValueError``/``TypeError`` naming the argument (audit: issue 17, items 4 and 9)."""
+ignore, with a ``ValueError``/``TypeError`` naming the argument."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ SUCTION_MODES = ("momentary", "latched")
 POSTURE_TARGETS = ("estimate", "tool")
 REWARD_POSES = ("estimate", "truth")
 SUCCESS_PAYOFFS = ("time_left", "fixed")
-RENDER_MODES = ("rgb_array", "depth_array")
+RENDER_MODES = ("rgb_array", "depth_array", "human")
 
 
 def _int_at_least(name: str, v: Any, least: int = 0) -> None:
@@ -44,6 +44,7 @@ def check_pregrasp_start(share: Any) -> None:
 def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, substeps: Any, tool: Any,
                    suction_mode: Any, horizon: Any, scene_pool: Any, pool_seed: Any, scenes: Any,
                    pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
+                   pose_error_range_deg: Any = None,
                    image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
                    scene_config: Any, posture_target: Any = "estimate", pregrasp_start: Any = 0.0,
                    reach_lateral_weight: Any = 1.0, reward_pose: Any = "estimate",
@@ -95,6 +96,17 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
         raise ValueError(f"pose_error_deg and position_noise apply to pose_source='noisy' only; with "
                          f"pose_source={pose_source!r} they would be ignored (got pose_error_deg="
                          f"{pose_error_deg!r}, position_noise={position_noise!r})")
+    if pose_error_range_deg is not None:
+        ok = (isinstance(pose_error_range_deg, (tuple, list)) and len(pose_error_range_deg) == 2
+              and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose_error_range_deg)
+              and 0 <= pose_error_range_deg[0] <= pose_error_range_deg[1] <= 180)
+        if not ok:
+            raise ValueError(f"pose_error_range_deg must be (low, high) degrees with 0 <= low <= high <= 180, "
+                             f"got {pose_error_range_deg!r}")
+        if pose_source != "noisy" or pose_error_deg or position_noise:
+            raise ValueError(f"pose_error_range_deg draws the 'noisy' source's error per episode: it needs "
+                             f"pose_source='noisy' without pose_error_deg or position_noise (got pose_source="
+                             f"{pose_source!r}, pose_error_deg={pose_error_deg!r}, position_noise={position_noise!r})")
     if target_rule not in RULES:
         raise ValueError(f"target_rule must be one of {RULES}, got {target_rule!r}")
     for name, size in (("image_size", image_size), ("render_size", render_size)):
@@ -105,9 +117,20 @@ def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, subst
     _finite("max_tilt_deg", max_tilt_deg, 0.0, 90.0, "a finite number in [0, 90]")
     if free_radius is not None:
         _finite("free_radius", free_radius, 1e-9, math.inf, "None or a finite number > 0 (m)")
-    if scene_config is not None:
-        from generator.config import SceneConfig
+    scene_config_of(scene_config)
 
-        if not isinstance(scene_config, SceneConfig):
-            raise TypeError(f"scene_config must be a generator.SceneConfig or None, got "
-                            f"{type(scene_config).__name__} {scene_config!r}")
+
+def scene_config_of(scene_config: Any) -> Any:
+    """The env's ``scene_config`` as a ``generator.SceneConfig`` (``None`` stays ``None``): its
+    mapping form (the JSON an env spec holds) is read with ``SceneConfig.from_dict``, whose
+    ``ConfigError`` names a bad field; anything else is a ``TypeError``."""
+    from collections.abc import Mapping
+
+    from generator.config import SceneConfig
+
+    if scene_config is None or isinstance(scene_config, SceneConfig):
+        return scene_config
+    if isinstance(scene_config, Mapping):
+        return SceneConfig.from_dict(scene_config)
+    raise TypeError(f"scene_config must be a generator.SceneConfig, its mapping form or None, got "
+                    f"{type(scene_config).__name__} {scene_config!r}")

@@ -30,6 +30,7 @@ from sms3d_env.env_args import (
     SUCTION_MODES,
     check_env_args,
     check_pregrasp_start,
+    scene_config_of,
 )
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
@@ -40,7 +41,8 @@ from sms3d_env.robots import make_robot
 from sms3d_env.scene_source import SceneSource
 from sms3d_env.targets import Reachability, select_target
 from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
-from sms3d_env.world import World, build_world
+from sms3d_env.viewer import PassiveViewer
+from sms3d_env.world import CAMERAS, PICK_CAMERA, PICK_CAMERA_DISTANCE, World, build_world
 
 __all__ = ["FAILURE_CAUSES", "POSTURE_TARGETS", "SUCTION_MODES", "SMS3DPickEnv"]
 
@@ -83,7 +85,7 @@ class SMS3DPickEnv(gym.Env):
     | ``target_pose`` | 6 | the *estimated* cap top (m) and stem axis (from the pose source) |
     | ``target_rel`` | 3 | estimated cap top − tool position (m) |
     | ``tool_in_target``, ``progress``, ``wrist_wrench`` | 7, 3, 6 | with ``task_obs=True``: see :mod:`sms3d_env.task_obs` |
-    | ``rgb``, ``depth`` | H × W × 3 uint8, H × W × 1 float32 | with ``image_obs=True`` (``camera``) |
+    | ``rgb``, ``depth`` | H × W × 3 uint8, H × W × 1 float32 | with ``image_obs=True`` (``camera``, by default ``"overhead"``) |
 
     Nothing in the observation is privileged: no true pose, no root or seal loads beyond what a
     vacuum sensor reports.
@@ -124,15 +126,22 @@ class SMS3DPickEnv(gym.Env):
       results history.
 
     Args:
-        render_mode: ``"rgb_array"`` or ``"depth_array"`` (metric depth in metres).
+        render_mode: ``"rgb_array"``, ``"depth_array"`` (metric depth in metres) or ``"human"``
+            (MuJoCo's passive viewer, synced at every reset and step, closed by ``close()``; it
+            needs a display, see :mod:`sms3d_env.viewer`, else ``DisplayUnavailableError``).
         scene_config: ``generator.SceneConfig`` for a new seeded scene per reset (default: 25
-            mushrooms). Ignored when ``scenes`` is given.
+            mushrooms), or its mapping form (``SceneConfig.from_dict``, e.g. ``{"placement":
+            {"num_mushrooms": 10}}``), which keeps the env's spec JSON (Minari datasets and RL Zoo
+            recipes rebuild the env from it). Ignored when ``scenes`` is given.
         scenes: a fixed list of ``generator.Scene`` objects, or the folder of a ``sms3d generate``
             dataset (checksums verified); one is drawn per reset (``options={"scene": k}``).
         pose_source: ``"oracle"``, ``"noisy"``, ``"perception"`` or a callable
             ``(scene, id, rng) -> PoseEstimate``.
         pose_error_deg, position_noise: the ``"noisy"`` source's rotation error (deg) and
             position noise standard deviation (m); refused with any other source.
+        pose_error_range_deg: ``(low, high)``: the ``"noisy"`` source's rotation error drawn per
+            episode, uniformly in that range (``UniformNoisyPose``), instead of
+            ``pose_error_deg``; a spec that stays JSON where the source object would not.
         target_rule: ``"tallest"``, ``"largest"``, ``"index"`` (with ``target_index``),
             ``"random"``; ``options={"target": i}`` overrides it for one reset.
         reward_type: ``"dense"``, ``"sparse"`` or ``"staged"``.
@@ -144,6 +153,11 @@ class SMS3DPickEnv(gym.Env):
             links that collide with nothing.
         control_dt, substeps: control period (s) and physics steps per control step.
         image_obs, image_size, camera: RGB-D observations of ``image_size`` from ``camera``.
+            ``camera``: one of ``world.CAMERAS``, for ``render()`` and image observations alike;
+            None (default): ``render()`` from ``"pick"`` (placed at each reset beyond the target
+            as seen from the robot's mount, looking at its cap top: the tool and the target in
+            view with either robot), image observations from ``"overhead"`` (the perception
+            camera; the pick camera is aimed with the true pose, a privileged view).
         render_size: ``render()``'s (height, width).
         max_tilt_deg: targets tilted more than this are not chosen.
         free_radius: only mushrooms whose stem base lies within this distance (m) of the
@@ -210,6 +224,7 @@ class SMS3DPickEnv(gym.Env):
         pose_source: str | PoseSource = "oracle",
         pose_error_deg: float = 0.0,
         position_noise: float = 0.0,
+        pose_error_range_deg: Sequence[float] | None = None,
         target_rule: str = "tallest",
         target_index: int = 0,
         reward_type: str = "dense",
@@ -220,7 +235,7 @@ class SMS3DPickEnv(gym.Env):
         substeps: int = 20,
         image_obs: bool = False,
         image_size: tuple[int, int] = (64, 64),
-        camera: str = "overhead",
+        camera: str | None = None,
         render_size: tuple[int, int] = (480, 640),
         max_tilt_deg: float = 45.0,
         free_radius: float | None = 0.10,
@@ -243,7 +258,8 @@ class SMS3DPickEnv(gym.Env):
                        substeps=substeps, tool=tool or self.robot_cfg.tool, suction_mode=suction_mode,
                        horizon=horizon, scene_pool=scene_pool, pool_seed=pool_seed, scenes=scenes,
                        pose_source=pose_source, pose_error_deg=pose_error_deg,
-                       position_noise=position_noise, target_rule=target_rule, image_size=image_size,
+                       position_noise=position_noise, pose_error_range_deg=pose_error_range_deg,
+                       target_rule=target_rule, image_size=image_size,
                        render_size=render_size, max_tilt_deg=max_tilt_deg, free_radius=free_radius,
                        scene_config=scene_config, posture_target=posture_target,
                        pregrasp_start=pregrasp_start,
@@ -254,8 +270,8 @@ class SMS3DPickEnv(gym.Env):
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
         self.render_mode = render_mode
-        self.scene_source = SceneSource(scene_config, scenes, scene_pool, pool_seed)
-        self.pose_source = make_pose_source(pose_source, pose_error_deg, position_noise)
+        self.scene_source = SceneSource(scene_config_of(scene_config), scenes, scene_pool, pool_seed)
+        self.pose_source = make_pose_source(pose_source, pose_error_deg, position_noise, pose_error_range_deg)
         self.target_rule, self.target_index = target_rule, target_index
         self.reward_type, self.reach_lateral_weight = reward_type, float(reach_lateral_weight)
         self.reward_pose, self.success_payoff = reward_pose, success_payoff
@@ -263,6 +279,8 @@ class SMS3DPickEnv(gym.Env):
         self.ctrl_cfg = controller or ControllerConfig()
         self.control_dt, self.substeps = float(control_dt), substeps
         self.image_obs, self.image_size = bool(image_obs), tuple(image_size)
+        if camera is not None and camera not in CAMERAS:
+            raise ValueError(f"camera must be None or one of {CAMERAS}, got {camera!r}")
         self.camera, self.render_size = camera, tuple(render_size)
         self.max_tilt_deg = max_tilt_deg
         self.free_radius = free_radius
@@ -290,6 +308,7 @@ class SMS3DPickEnv(gym.Env):
         self._reward_goal = np.zeros(6)  # the pose the reward shapes towards (``reward_pose``)
         self.done = False  # the episode terminated or was truncated
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._viewer = PassiveViewer(self.control_dt) if render_mode == "human" else None
 
     # The world's model, data and scene (None before the first reset).
     @property
@@ -346,6 +365,8 @@ class SMS3DPickEnv(gym.Env):
         for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
             mujoco.mj_step(m, d)
         self.picking.settled()
+        if self.render_mode == "human":
+            self.render()
         return self._obs(), {**self.picking.evaluate(), "start": self._start, "time_s": 0.0}
 
     def step(self, action: np.ndarray):
@@ -392,6 +413,8 @@ class SMS3DPickEnv(gym.Env):
         if ep.unstable:
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
             mujoco.mj_forward(m, d)
+        if self.render_mode == "human":
+            self.render()
         return self._obs(), reward, terminated, truncated, info
 
     def _model_key(self, slot: int | None, target: int) -> tuple[int, int | None] | None:
@@ -477,8 +500,9 @@ class SMS3DPickEnv(gym.Env):
         obs = {k: flat[sl] for k, sl in self._obs_slices.items()}
         if self.image_obs:
             h, wd = self.image_size
-            obs["rgb"] = self._render(h, wd, depth=False)
-            obs["depth"] = self._render(h, wd, depth=True)[..., None].astype(np.float32)
+            camera = self.camera or "overhead"
+            obs["rgb"] = self._render(h, wd, camera, depth=False)
+            obs["depth"] = self._render(h, wd, camera, depth=True)[..., None].astype(np.float32)
         return obs
 
     def _task_obs(self) -> list[np.ndarray]:
@@ -500,7 +524,17 @@ class SMS3DPickEnv(gym.Env):
             r.close()
         self._renderers = {}
 
-    def _render(self, h: int, w: int, depth: bool) -> np.ndarray:
+    @property
+    def viewer(self) -> PassiveViewer | None:
+        """``render_mode="human"``'s window (``viewer.is_running``); None in the other modes."""
+        return self._viewer
+
+    @property
+    def render_camera(self) -> str:
+        """The camera ``render()`` shows: ``camera``, by default ``world.PICK_CAMERA``."""
+        return self.camera or PICK_CAMERA
+
+    def _render(self, h: int, w: int, camera: str, depth: bool) -> np.ndarray:
         os.environ.setdefault("MUJOCO_GL", "egl")
         r = self._renderers.get((h, w))
         if r is None:
@@ -509,19 +543,31 @@ class SMS3DPickEnv(gym.Env):
             r.enable_depth_rendering()
         else:
             r.disable_depth_rendering()
-        r.update_scene(self.data, camera=self.camera)
+        r.update_scene(self.data, camera=camera)
         return r.render().copy()
 
     def render(self) -> np.ndarray | None:
+        """``rgb_array``: (H, W, 3) uint8; ``depth_array``: (H, W) float32 metres, both of
+        ``render_size`` from ``render_camera``; ``human``: show the viewer (None); None before
+        the first reset."""
         if self.render_mode is None or self.world is None:
             return None
+        if self.render_mode == "human":
+            m, d = self.world.model, self.world.data
+            cam = m.camera(self.render_camera).id
+            eye, back = d.cam_xpos[cam], d.cam_xmat[cam].reshape(3, 3)[:, 2]
+            self._viewer.show(m, d, eye, eye - PICK_CAMERA_DISTANCE * back)
+            return None
         h, w = self.render_size
-        return self._render(h, w, depth=self.render_mode == "depth_array")
+        return self._render(h, w, self.render_camera, depth=self.render_mode == "depth_array")
 
     def close(self) -> None:
         self._disown_renderers()
+        if self._viewer is not None:
+            self._viewer.close()
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_renderers"] = {}  # GL contexts do not pickle (World carries its MjData's state)
+        state["_viewer"] = None  # nor does a window
         return state

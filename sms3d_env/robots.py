@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from sms3d_env.gantry import GantryConfig
 from sms3d_env.robot import RobotConfig, RobotSpec
+from sms3d_env.robot_names import ROBOTS
 
-ROBOTS: tuple[str, ...] = ("gantry", "jaco")
 #: The Jaco of ``SMS3DPick-v1``: hanging upside down 0.7 m above the soil, 0.25 m from the patch
 #: centre, with a right-angle suction adapter (``tool_tilt_deg=90``). ASSUMPTIONS chosen by
 #: measurement: mounted beside the bed at or below the soil, as in v0, its upper arm and forearm

@@ -5,13 +5,14 @@ and the id tables the picking model and the env read (dm_control's entities, apa
 the target keep a free joint and a root weld; with the suction tool each of them also gets an
 inactive grip weld to the cup, with the hand a stem socket (``add_stem_sockets``) that holds it
 up once detached. Contact masks (physics.py's bits) are set here once; the picking
-model changes them as mushrooms detach and lift.
+model changes them as mushrooms detach and lift. The ``pick`` camera is aimed at the target
+(``aim_pick_camera``).
 """
 
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,6 +31,18 @@ from sms3d_env.robot import (
 )
 
 _STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION)
+
+#: The camera of ``render()`` by default: aimed at each episode's target by ``aim_pick_camera``.
+PICK_CAMERA = "pick"
+#: Every camera of the world: the scene's ``overhead`` (the perception camera), a fixed ``side``
+#: view of the bed's centre, and ``pick``.
+CAMERAS = ("overhead", "side", PICK_CAMERA)
+# The pick camera's view (chosen by looking at both robots' picks): 30 cm from a point 3 cm above
+# the target's cap top (the cup above the cap stays in the picture), 25 deg above the horizon.
+PICK_CAMERA_FOVY_DEG = 45.0
+PICK_CAMERA_DISTANCE = 0.30
+PICK_CAMERA_ELEVATION_DEG = 25.0
+PICK_CAMERA_LOOK_ABOVE = 0.03
 
 
 @dataclass
@@ -128,6 +141,28 @@ def add_stem_sockets(spec: mujoco.MjSpec, scene: Any, ids: Iterable[int], drop: 
             contype=ph.SOCKET_CONTYPE, conaffinity=0, group=4, rgba=[0.4, 0.3, 0.2, 0])
 
 
+def aim_pick_camera(model: mujoco.MjModel, cap_top: np.ndarray, mount_pos: Sequence[float]) -> None:
+    """Place ``PICK_CAMERA`` in ``model`` (its ``cam_pos`` and ``cam_quat``) beyond the target as
+    seen from the robot's mount, looking back at the target's cap top (m, world frame): the robot
+    reaches in behind the target instead of between the camera and the target (a Jaco hanging
+    beside the bed blocks views from its own side). A target within 2 cm of the mount's foot
+    (the gantry's frame origin is the bed's centre) is seen from -y, as the ``side`` camera."""
+    lookat = np.asarray(cap_top, float) + [0.0, 0.0, PICK_CAMERA_LOOK_ABOVE]
+    outward = lookat[:2] - np.asarray(mount_pos[:2], float)
+    norm = np.linalg.norm(outward)
+    outward = outward / norm if norm > 0.02 else np.array([0.0, -1.0])
+    elevation = np.radians(PICK_CAMERA_ELEVATION_DEG)
+    eye = lookat + PICK_CAMERA_DISTANCE * np.r_[np.cos(elevation) * outward, np.sin(elevation)]
+    forward = (lookat - eye) / PICK_CAMERA_DISTANCE
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    back = -forward  # a MuJoCo camera looks along its -z, with +y up in the picture
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, np.column_stack([right, np.cross(back, right), back]).ravel())
+    cam = model.camera(PICK_CAMERA).id
+    model.cam_pos[cam], model.cam_quat[cam] = eye, quat
+
+
 def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float) -> mujoco.MjSpec:
     """The scene + robot ``MjSpec`` (grip welds or stem sockets per free mushroom, cameras)."""
     from generator.mjcf import scene_to_spec
@@ -143,17 +178,19 @@ def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float) ->
         add_stem_sockets(spec, scene, sorted(free))
         # Friction grasps creep out of MuJoCo's default pyramidal cone (impratio 1): lifted
         # mushrooms slid out of the closed fingers. The elliptic cone with impratio 10 (MuJoCo's
-        # remedy for slip) keeps them (benchmarks/RESULTS.md). Hand only: the suction model
+        # remedy for slip) keeps them (9 of 40 picked with the pyramidal cone, 26 grips lost;
+        # docs/results-environment.md). Hand only: the suction model
         # stays as its accuracy study measured it.
         spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
         spec.option.impratio = 10.0
     spec.worldbody.add_camera(name="side", pos=[0.0, -0.42, 0.28],
                               xyaxes=[1, 0, 0, 0, 0.6, 0.8], fovy=50)
+    spec.worldbody.add_camera(name=PICK_CAMERA, fovy=PICK_CAMERA_FOVY_DEG)  # aimed per episode
     spec.option.timestep = timestep
     # Sleeping islands: rooted mushrooms at rest drop out of the pipeline (constraint rows
     # 48 -> 6 in a 50-mushroom scene, mj_step ~2x faster) and wake, exactly as MuJoCo
     # documents, when the tool touches them or a grip weld joins them to the awake arm (an
-    # actuated tree, which never sleeps). Same picker outcomes (benchmarks/RESULTS.md).
+    # actuated tree, which never sleeps). The scripted picker's episodes came out the same.
     spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_SLEEP)
     return spec
 
@@ -173,6 +210,7 @@ def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | 
         m = copy.copy(cache[cache_key])
     else:
         m = world_spec(scene, free, robot, timestep).compile()
+    aim_pick_camera(m, scene.instances[target].cap_top, robot.mount_pos)
     d = mujoco.MjData(m)
     is_free = np.array([i in free for i in range(n)])
     terrain = m.geom("terrain").id

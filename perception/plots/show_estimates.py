@@ -61,6 +61,8 @@ def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
     intr = sample.intrinsics
     world = sample.world_from_camera
@@ -111,7 +113,11 @@ def estimates_figure(sample: SceneSample, estimates: list[MushroomEstimate], out
     ax3d.set_ylabel("y (m)")
     ax3d.set_zlabel("z (m)")
     ax3d.set_title("the same boxes in 3D (observed points, second viewpoint)")
-    fig.tight_layout()
+    fig.legend(handles=[Line2D([], [], color=np.array(TRUTH_RGB) / 255.0, label="ground-truth cap box"),
+                        Line2D([], [], color=np.array(ESTIMATE_RGB) / 255.0, label="estimated cap box"),
+                        Patch(facecolor=np.array(ESTIMATE_RGB) / 255.0, alpha=0.4, label="detected mask")],
+               loc="lower center", ncol=3, fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png")
     plt.close(fig)

@@ -16,6 +16,9 @@ from pathlib import Path
 from typing import Any
 
 PICKER_KINDS = ("scripted", "policy", "residual")
+#: What figures and tables call a picker by its ``PickerSpec.label``: the shipped ones by the
+#: names the documentation uses; a saved model keeps its label (kind and run folder).
+PICKER_NAMES = {"scripted": "scripted picker", "policy": "shipped policy", "residual": "learned descend trigger"}
 
 
 #: The env the scripted picker acts in (a learned picker acts in the one it was trained on).
@@ -44,6 +47,11 @@ class PickerSpec:
         if self.kind == "scripted":
             return None
         return Path(self.path) if self.path else (SHIPPED_TRIGGER if self.kind == "residual" else SHIPPED_POLICY)
+
+
+def picker_name(label: str) -> str:
+    """The name a figure or table gives the picker of a sweep row's ``picker`` label."""
+    return PICKER_NAMES.get(label, label)
 
 
 def parse_picker(text: str) -> PickerSpec:

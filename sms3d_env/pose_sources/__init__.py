@@ -21,11 +21,15 @@ __all__ = ["NoisyPose", "OraclePose", "PerceptionPose", "PoseEstimate", "PoseSou
 
 
 def make_pose_source(kind: str | PoseSource, pose_error_deg: float = 0.0,
-                     position_std: float = 0.0) -> PoseSource:
-    """``"oracle"``, ``"noisy"``, ``"perception"`` (the two-stage pipeline with the shipped pose
+                     position_std: float = 0.0,
+                     pose_error_range_deg: tuple[float, float] | None = None) -> PoseSource:
+    """``"oracle"``, ``"noisy"`` (with ``pose_error_range_deg``: :class:`UniformNoisyPose`, the
+    error drawn per episode), ``"perception"`` (the two-stage pipeline with the shipped pose
     network, :class:`PerceptionPose`) or any callable pose source."""
     if callable(kind):
         return kind
+    if kind == "noisy" and pose_error_range_deg is not None:
+        return UniformNoisyPose(*pose_error_range_deg)
     if kind == "oracle":
         return OraclePose()
     if kind == "noisy":

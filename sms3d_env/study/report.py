@@ -13,12 +13,13 @@ from typing import Any
 import numpy as np
 
 from generator.files import write_atomic
+from sms3d_env.pickers.registry import picker_name
 from sms3d_env.study import success_map
 from sms3d_env.study.figures import plot_curves, save_figure
 from sms3d_env.study.statistics import (
-    RowAxes,
     TILTED_DEG,
     WITHIN_PP,
+    RowAxes,
     axes,
     crowded_threshold,
     perception_point,
@@ -76,8 +77,8 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     top.set_ylim(0, 105)
     top.grid(alpha=0.3)
     top.legend(fontsize=8, loc="lower left")
-    pickers = sorted({r.get("picker", "scripted") for r in rows})
-    top.set_title(f"{', '.join(pickers).capitalize()} suction picker: success vs orientation error")
+    pickers = sorted({picker_name(r.get("picker", "scripted")) for r in rows})
+    top.set_title(f"{', '.join(pickers).capitalize()}: suction pick success vs orientation error")
     default = [r for r in table if r["variant"] == "default"]
     causes = sorted({c for r in default for c in r["causes"]})
     bottom_acc = np.zeros(len(default))

@@ -15,7 +15,14 @@ from typing import Any
 import numpy as np
 
 from sms3d_env.study.figures import plot_curves, save_figure
-from sms3d_env.study.statistics import TILTED_DEG, WITHIN_PP, axes, crowded_threshold, cycle_time, success_table
+from sms3d_env.study.statistics import (
+    TILTED_DEG,
+    WITHIN_PP,
+    axes,
+    crowded_threshold,
+    cycle_time,
+    success_table,
+)
 
 ISO_POINTS = (2.0, 5.0, 10.0)  # iso-lines of the map: oracle success minus these many points
 

@@ -26,7 +26,7 @@ from generator.errors import ConfigError
 from generator.files import write_atomic
 from generator.run_folder import check_out_path
 from sms3d_env.physics_params import PickPhysicsParams
-from sms3d_env.pickers.registry import SCRIPTED_ENV_ID
+from sms3d_env.pickers.registry import SCRIPTED_ENV_ID, picker_name
 from sms3d_env.study.report import write_report
 
 DEFAULT_ERRORS_DEG = (0.0, 1.0, 2.0, 3.0, 5.0, 7.5, 10.0, 15.0, 20.0, 30.0)
@@ -84,7 +84,7 @@ class SweepConfig:
 
         if not self.tools or any(t not in TOOLS for t in self.tools):
             raise ConfigError("tools", f"must be among {TOOLS}, got {self.tools!r}")
-        from sms3d_env.robots import ROBOTS
+        from sms3d_env.robot_names import ROBOTS
 
         if not self.robots or any(r not in ROBOTS for r in self.robots) or len(set(self.robots)) < len(self.robots):
             raise ConfigError("robots", f"must be distinct names among {ROBOTS}, got {self.robots!r}")
@@ -413,7 +413,7 @@ def _cmd_compare(args: Any) -> int:
             if not rows:
                 raise ValueError(f"{folder} holds no episodes of the noisy pose source with the default "
                                  "physics, the ones compared; rerun it with --variants default")
-            label = rows[0].get("picker", "scripted")
+            label = picker_name(rows[0].get("picker", "scripted"))
             # Two sweeps of one picker (e.g. with other env options) keep both curves.
             label = label if label not in curves else f"{label} ({name})"
             curves[label], sweeps[folder] = rows, rows
@@ -520,6 +520,8 @@ SWEEP_FLAGS = {"errors_deg": "--errors", "episodes": "--episodes", "chunk": "--c
 
 def register(subparsers: Any) -> None:
     """Add ``sms3d sweep``."""
+    from sms3d_env.robot_names import ROBOTS
+
     p = subparsers.add_parser("sweep", help="pick success of a picker against orientation and position error")
     p.add_argument("--out", required=True, help="output folder (resumes if it holds earlier parts)")
     p.add_argument("--errors", type=float, nargs="+", default=list(DEFAULT_ERRORS_DEG),
@@ -535,7 +537,7 @@ def register(subparsers: Any) -> None:
                    help="offset the cap top along the estimated axis instead of across it")
     p.add_argument("--tool", nargs="+", default=["suction"], choices=["suction", "hand"],
                    help="tools to sweep (the scripted picker for each)")
-    p.add_argument("--robot", nargs="+", default=list(SweepConfig.robots), choices=["gantry", "jaco"],
+    p.add_argument("--robot", nargs="+", default=list(SweepConfig.robots), choices=ROBOTS,
                    help="robots to sweep (SMS3DPick-v1's; several make the robot an axis: a robot column in "
                         "sweep.csv, a curve and a map per robot)")
     p.add_argument("--backend", choices=BACKENDS, default="process",

@@ -9,6 +9,9 @@
 | the start-state curriculum that follows home-start success (``pregrasp_annealing``) | :mod:`~sms3d_env.training.curriculum` |
 | the critic warm-up that freezes PPO's actor first (``critic_warmup``) | :mod:`~sms3d_env.training.warmup` |
 | behaviour cloning + DAgger of the scripted picker (``BCConfig``, ``train_bc``) | :mod:`~sms3d_env.training.imitation` |
+| demonstrations as Minari datasets (``record_datasets``, ``labelled_steps``, ``ExpertLabels``) | :mod:`~sms3d_env.training.demonstrations` |
+| ``sms3d record-demos`` | :mod:`~sms3d_env.training.cli_demos` |
+| RL Baselines3 Zoo: the recipe files (``with_recipe``) and the runs it saves (``zoo_run_of``, ``read_vecnormalize``) | :mod:`~sms3d_env.training.zoo` |
 | residual policies on top of the scripted picker (``ResidualPicker``) | :mod:`~sms3d_env.training.residual` |
 | a descend trigger learned from paired counterfactual rollouts (``TriggerConfig``, ``train_trigger``) | :mod:`~sms3d_env.training.trigger_rollouts` |
 | the shipped policies' features extractor (``NormalizedFlatten``) | :mod:`~sms3d_env.training.policy_features` |
@@ -29,6 +32,7 @@ _EXPORTS = {
     "make_env": "envs", "train_policy": "rl", "WallAwareLinearSchedule": "schedules",
     "critic_warmup": "warmup",
     "BCConfig": "imitation", "train_bc": "imitation", "ResidualPicker": "residual",
+    "record_datasets": "demonstrations", "labelled_steps": "demonstrations", "with_recipe": "zoo",
     "TriggerConfig": "trigger_rollouts", "train_trigger": "trigger_rollouts",
     "NormalizedFlatten": "policy_features",
     "SHIPPED_POLICY": "actor", "SHIPPED_TRIGGER": "actor", "PolicyActor": "actor", "load_model": "actor",

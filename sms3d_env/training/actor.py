@@ -2,10 +2,15 @@
 the env it was trained on from the files beside it); ``SHIPPED_POLICY`` is the shipped one, and
 ``SHIPPED_TRIGGER`` the shipped descend trigger (a residual picker).
 
+A model that RL Baselines3 Zoo saved (``python -m rl_zoo3.train``) loads too: its env, options
+and observation statistics come from the run's ``args.yml``, ``config.yml`` and
+``vecnormalize.pkl`` (:mod:`sms3d_env.training.zoo`).
+
 Trust: an SB3 model zip holds cloudpickled objects (its spaces, schedules, policy class), so
 loading an SB3 model from elsewhere runs code from it; load only files you trust. The observation
 statistics beside a model (``obs_rms.npz``) are plain arrays and are read without unpickling;
-an SB3 ``vecnormalize.pkl`` is never loaded.
+an SB3 ``vecnormalize.pkl`` beside a model is never loaded, and an RL Zoo run's is decoded by a
+restricted reader that builds arrays and inert records only (:func:`~sms3d_env.training.zoo.read_vecnormalize`).
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import numpy as np
 
 from sms3d_env.training.config import ALGOS
 from sms3d_env.training.model_files import OBS_STATS_FILE, ObservationStats, PolicyFileError
+from sms3d_env.training.zoo import read_vecnormalize, zoo_run_of
 
 #: The shipped pick policy (``model.zip`` with its ``config.json``, ``README.md``, metrics).
 SHIPPED_POLICY = Path(__file__).parents[1] / "weights" / "pick_policy" / "model.zip"
@@ -135,7 +141,8 @@ def load_sb3(path: Path, algos: tuple[str, ...], **kwargs: Any) -> Any:
 class PolicyActor:
     """A saved SB3 model as ``actor(obs) -> action``, its observation statistics applied when they
     were saved with it (:func:`observation_stats_path`). ``env_id``/``env_options``: what it was trained on
-    (:func:`saved_config_path`; ``SMS3DPick-v0`` with no options if there is none).
+    (:func:`saved_config_path`, else an rl_zoo3 run's files (:func:`~sms3d_env.training.zoo.zoo_run_of`);
+    ``SMS3DPick-v0`` with no options if there is neither).
 
     Files that cannot be used raise ``PolicyFileError`` naming them, here or, for a
     ``config.json`` whose env does not give the observation the policy was trained on, in
@@ -148,7 +155,9 @@ class PolicyActor:
             raise FileNotFoundError(f"model not found: {path}")
         self.path, self.deterministic = path, deterministic
         self.config_path = saved_config_path(path)
-        self.saved: dict[str, Any] = {} if self.config_path is None else read_saved_config(self.config_path)
+        zoo_run = zoo_run_of(path) if self.config_path is None else None
+        self.saved: dict[str, Any] = (read_saved_config(self.config_path) if self.config_path is not None
+                                      else zoo_run.saved_config() if zoo_run is not None else {})
         self.env_id = self.saved.get("env_id", "SMS3DPick-v0")
         self.env_options = dict(self.saved.get("env_options", {}))
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
@@ -162,9 +171,11 @@ class PolicyActor:
             raise PolicyFileError(self.config_path, "flat_observation is set but observation_keys (the flattening "
                                                     "order) is missing; retrain, or add the keys of the env's "
                                                     "observation space")
-        self.model = load_model(path, algo)
+        self.model = load_model(path, algo or self.saved.get("algo"))
         stats = observation_stats_path(path)
-        self.obs_stats = None if stats is None else ObservationStats.load(stats)
+        self.obs_stats = (ObservationStats.load(stats) if stats is not None
+                          else read_vecnormalize(zoo_run.stats_path) if zoo_run is not None and self.saved["normalize"]
+                          else None)
         if self.obs_stats is None and self.saved.get("normalize"):
             raise PolicyFileError(path, f"was trained on normalised observations, but no {OBS_STATS_FILE} "
                                         "(or its checkpoint's) lies beside it")

@@ -45,6 +45,9 @@ def _summary_or_refusal(run: Callable[[], dict[str, Any]]) -> int:
 
 
 def _cmd_train(args: Any) -> int:
+    if args.conf_file is not None and args.recipe != "rl":
+        print(f"error: --conf-file holds an rl recipe (PPO/SAC from scratch), not --recipe {args.recipe}")
+        return 2
     if args.recipe == "bc":
         return _cmd_train_bc(args)
     noisy = args.pose_error_deg > 0 or args.pose_error_range is not None
@@ -58,7 +61,7 @@ def _cmd_train(args: Any) -> int:
             print(f"error: {flag} applies to --recipe residual")
             return 2
     try:
-        cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v0" if residual else args.env_id,
+        cfg = TrainConfig(algo=args.algo, env_id="SMS3DPickTrain-v1" if residual else args.env_id,
                           normalize=args.normalize or residual, normalize_reward=args.normalize_reward,
                           scene_pool=args.scene_pool,
                           residual_scale=args.residual_scale if residual else 0.0,
@@ -85,7 +88,11 @@ def _cmd_train(args: Any) -> int:
                           success_payoff=args.success_payoff, gamma=args.gamma,
                           time_limit_terminal=args.time_limit_terminal, use_sde=args.use_sde,
                           sde_sample_freq=args.sde_sample_freq)
-    except ValueError as e:
+        if args.conf_file is not None:
+            from sms3d_env.training.zoo import with_recipe
+
+            cfg = with_recipe(cfg, args.conf_file)
+    except (ValueError, FileNotFoundError) as e:  # RecipeError names the file and key
         print(f"error: {e}")
         return 2
     return _summary_or_refusal(lambda: train_policy(cfg, overwrite=args.overwrite))
@@ -122,7 +129,8 @@ def _cmd_train_bc(args: Any) -> int:
             print(f"error: {flag} applies to the rl and residual recipes (the bc recipe: {why})")
             return 2
     try:
-        cfg = BCConfig(episodes=args.demo_episodes, epochs=args.epochs, action_noise=args.action_noise,
+        cfg = BCConfig(demos=tuple(args.demos), episodes=args.demo_episodes, epochs=args.epochs,
+                       action_noise=args.action_noise,
                        pose_error_deg=args.pose_error_deg, pose_error_range_deg=args.pose_error_range,
                        teacher=args.teacher, posture_target=args.posture_target, seed=args.seed, out=args.out,
                        num_mushrooms=tuple(args.demo_mushrooms), dagger_rounds=args.dagger_rounds,
@@ -130,7 +138,13 @@ def _cmd_train_bc(args: Any) -> int:
     except ValueError as e:
         print(f"error: {e}")
         return 2
-    return _summary_or_refusal(lambda: train_bc(cfg, overwrite=args.overwrite))
+    from sms3d_env.training.demonstrations import DatasetError
+
+    try:
+        return _summary_or_refusal(lambda: train_bc(cfg, overwrite=args.overwrite))
+    except (DatasetError, ImportError) as e:  # a --demos dataset it cannot use; Minari missing
+        print(f"error: {e}")
+        return 2
 
 
 def _cmd_train_trigger(args: Any) -> int:
@@ -138,7 +152,7 @@ def _cmd_train_trigger(args: Any) -> int:
 
     try:
         cfg = TriggerConfig(out=args.out, episodes=args.episodes, seed=args.seed, num_mushrooms=args.num_mushrooms,
-                            pose_error_range_deg=tuple(args.pose_error_range), posture_target=args.posture_target,
+                            pose_error_range_deg=tuple(args.pose_error_range), posture_target=args.posture_target, robot=args.robot,
                             candidates=args.candidates, margin=args.margin, epochs=args.epochs,
                             workers=args.workers)
     except ValueError as e:
@@ -153,7 +167,8 @@ def _cmd_eval(args: Any) -> int:
         return 2
     try:
         res = evaluate_policy_success(args.model, episodes=args.episodes, pose_error_deg=args.pose_error_deg,
-                                      seed=args.seed, num_mushrooms=args.num_mushrooms, progress=True)
+                                      seed=args.seed, num_mushrooms=args.num_mushrooms, progress=True,
+                                      video_dir=args.video, video_size=tuple(args.video_size))
     except ConfigError as e:  # an argument, named by its flag
         print(f"error: argument --{e.field.replace('_', '-')}: {e.message}")
         return 2
@@ -171,17 +186,23 @@ def _cmd_eval(args: Any) -> int:
 
 def register(subparsers: Any) -> None:
     """Add ``sms3d train-policy``, ``sms3d eval-policy`` and ``sms3d learning-curve``."""
+    from sms3d_env.robot_names import ROBOTS
+
     defaults = TrainConfig()
     p = subparsers.add_parser(
         "train-policy", help="train a pick policy: RL (PPO/SAC, stable-baselines3) or behaviour "
                              "cloning of the scripted picker (--recipe bc)")
     p.add_argument("--recipe", choices=RECIPES, default="rl",
                    help="rl: PPO/SAC from scratch (default); bc: scripted demonstrations -> "
-                        "behaviour cloning on SMS3DPickTrain-v0 (sms3d_env.training.imitation); residual: "
-                        "PPO/SAC on top of the scripted picker on SMS3DPickTrain-v0 (sms3d_env.training.residual)")
+                        "behaviour cloning on SMS3DPickTrain-v1 (sms3d_env.training.imitation); residual: "
+                        "PPO/SAC on top of the scripted picker on SMS3DPickTrain-v1 (sms3d_env.training.residual)")
+    p.add_argument("--conf-file", default=None, metavar="FILE",
+                   help="rl: take the recipe from an RL Baselines3 Zoo hyperparameter file (the one rl_zoo3.train "
+                        "--conf-file reads), or a shipped one by name (ppo: PPO from scratch); flags it sets must "
+                        "be left out; --out, --seed, --eval-*, --checkpoint-freq and --vec-env stay flags")
     p.add_argument("--algo", choices=ALGOS, default=defaults.algo)
     p.add_argument("--env-id", choices=ENV_IDS, default=defaults.env_id,
-                   help="SMS3DPickTrain-v0: the learnable options (latched suction, staged reward, ...)")
+                   help="SMS3DPickTrain-v1: the learnable options (latched suction, staged reward, ...)")
     p.add_argument("--normalize", action="store_true", help="standardise observations (VecNormalize)")
     p.add_argument("--normalize-reward", action="store_true",
                    help="rl/residual, with --normalize: also scale training rewards by the running std of the "
@@ -265,7 +286,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--gamma", type=float, default=defaults.gamma,
                    help="rl/residual: the discount factor (default %(default)s)")
     p.add_argument("--time-limit-terminal", action="store_true",
-                   help="rl/residual on SMS3DPickTrain-v0: the time limit terminates episodes instead of "
+                   help="rl/residual on SMS3DPickTrain-v1: the time limit terminates episodes instead of "
                         "truncating them, so that PPO does not bootstrap the return there (the policy sees the "
                         "clock; an approach stalled until the limit then earns what it earned, not the critic's "
                         "guess of what would follow)")
@@ -294,6 +315,9 @@ def register(subparsers: Any) -> None:
                         "first learns the starting policy's returns (a residual's: the scripted picker's; "
                         "default 0: none)")
     bc = p.add_argument_group("behaviour cloning (--recipe bc)")
+    bc.add_argument("--demos", nargs="+", default=[], metavar="DATASET_ID",
+                    help="clone these Minari datasets (sms3d record-demos, on SMS3DPickTrain-v1; found under "
+                         "MINARI_DATASETS_PATH) instead of recording demonstrations into --out/datasets")
     bc.add_argument("--demo-episodes", type=int, default=400, help="scripted episodes (failures dropped)")
     bc.add_argument("--demo-mushrooms", type=int, nargs="+", default=[10, 25], help="bed sizes cycled through")
     bc.add_argument("--action-noise", type=float, default=0.2, help="DART noise on the twist while collecting")
@@ -324,6 +348,8 @@ def register(subparsers: Any) -> None:
     t.add_argument("--pose-error-range", type=float, nargs=2, default=list(tdef.pose_error_range_deg),
                    metavar=("LOW", "HIGH"), help="orientation error drawn per episode in [LOW, HIGH] degrees")
     t.add_argument("--posture-target", choices=POSTURE_TARGETS, default=tdef.posture_target)
+    t.add_argument("--robot", choices=ROBOTS, default=tdef.robot,
+                   help="the robot the trigger learns to act on (SMS3DPick-v1's)")
     t.add_argument("--candidates", type=int, default=tdef.candidates,
                    help="most replays per episode, each firing the trigger at one step within its reach")
     t.add_argument("--margin", type=float, default=tdef.margin,
@@ -341,6 +367,12 @@ def register(subparsers: Any) -> None:
     e.add_argument("--num-mushrooms", type=int, default=None,
                    help="mushrooms per bed (default: the training bed size, else 25)")
     e.add_argument("--json", default=None, help="also write the result here")
+    e.add_argument("--video", default=None, metavar="DIR",
+                   help="also write each episode as DIR/episode_<seed>.mp4: the pick camera, the target "
+                        "ringed, time and phase on every frame, the outcome and its cause at the end "
+                        '(needs imageio-ffmpeg: pip install "sms3d-pick[video]")')
+    e.add_argument("--video-size", type=int, nargs=2, default=[480, 640], metavar=("HEIGHT", "WIDTH"),
+                   help="the videos' frame size in pixels, both even (default 480 640)")
     e.set_defaults(func=_cmd_eval)
 
     from sms3d_env.training import learning_curve

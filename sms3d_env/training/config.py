@@ -10,7 +10,11 @@ from typing import Any
 ALGOS = ("ppo", "sac")
 POSE_SOURCES = ("oracle", "noisy")
 REWARD_TYPES = ("dense", "sparse", "staged")
-ENV_IDS = ("SMS3DPick-v0", "SMS3DPickTrain-v0")
+#: The ids a policy can be trained on: the base ids (whose ``reward_type`` is an option) and the
+#: training ids (the learnable options, the staged reward among them); v0 ids are superseded.
+BASE_ENV_IDS = ("SMS3DPick-v1", "SMS3DPick-v0")
+TRAIN_ENV_IDS = ("SMS3DPickTrain-v1", "SMS3DPickTrain-v0")
+ENV_IDS = BASE_ENV_IDS + TRAIN_ENV_IDS
 RECIPES = ("rl", "bc", "residual")
 VEC_ENVS = ("subproc", "dummy")
 POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.env_args.POSTURE_TARGETS (kept free of scipy here)
@@ -48,7 +52,7 @@ class TrainConfig:
         vec_env: ``"subproc"`` (default): one worker process per env when ``n_envs`` > 1
             (SB3's ``SubprocVecEnv``); ``"dummy"``: every env in the training process, one after
             another (``DummyVecEnv``). On 2 cores ``"dummy"`` ran ≈ 6 % faster and leaves the
-            second core free (benchmarks/RESULTS.md, "Session 19").
+            second core free (docs/results-training.md).
         flat_observation: the dict observation flattened into one vector (gymnasium's
             ``FlattenObservation``, outermost) and SB3's ``MlpPolicy`` on it instead of
             ``MultiInputPolicy``: the same inputs and network, one normalisation and one tensor
@@ -56,7 +60,7 @@ class TrainConfig:
             ``config.json`` with the flattening order (``observation_keys``); ``PolicyActor``
             flattens dict observations so.
         pose_source, pose_error_deg, position_noise: the target pose estimate used in training.
-        env_id: ``"SMS3DPick-v0"`` (its options as given here) or ``"SMS3DPickTrain-v0"`` (the
+        env_id: ``"SMS3DPick-v1"`` (its options as given here) or ``"SMS3DPickTrain-v1"`` (the
             learnable options: latched suction, staged reward, dead-end episode end, task
             observations; ``reward_type`` is then ignored and must stay at its default).
         normalize: standardise observations with running statistics (``VecNormalize``).
@@ -66,9 +70,9 @@ class TrainConfig:
             of the policy's and the value function's gradients *together* (``max_grad_norm``
             0.5), and the staged reward's success step pays up to 249 at once, so a rollout with
             successes has value gradients that shrink its own policy step. Measured on the
-            session-19 seed-0 run's checkpoints: the policy step of a minibatch was scaled by
+            checkpoints of a seed-0 run with raw rewards: the policy step of a minibatch was scaled by
             0.007 on a rollout with successes (returns up to 141) against 0.04 on one without
-            (benchmarks/RESULTS.md, "Session 20").
+            (docs/results-training.md).
         scene_pool: > 0: each env draws its beds from a pool of this many (the env's
             ``scene_pool``; resets then cost physics, not placement and compilation).
         residual_scale: > 0 trains a residual on top of the scripted picker
@@ -88,7 +92,7 @@ class TrainConfig:
         trigger_log_std: the log standard deviation of that entry's exploration noise; ``None``
             (default): ``DESCEND_TRIGGER_LOG_STD_INIT`` (-0.9) for a fresh policy, an
             ``init_model``'s own otherwise. Lower, a stochastic policy fires less often by chance,
-            so that not firing in a stall costs the episode (session 23). Needs
+            so that not firing in a stall costs the episode. Needs
             ``residual_descend_trigger``.
         trigger_log_std_final: move that log standard deviation on a line from
             ``trigger_log_std`` (needed) to this over the run (by steps, or by whichever of steps
@@ -110,7 +114,7 @@ class TrainConfig:
             ``LinearSchedule``; the PPO paper anneals its rate so), so that one run lowers the rate
             that a second phase, started from the first's checkpoint, lowered by hand. The schedule runs over
             ``total_steps``: with ``max_wall_s``, set ``total_steps`` to what fits in it (PPO on 2
-            envs here: 280–420 steps/s, sessions 15–20), or the rate stops short of its final value; or set
+            envs here: 280–420 steps/s), or the rate stops short of its final value; or set
             ``learning_rate_by_wall``.
         learning_rate_by_wall: the falling rate runs over whichever ends first, ``total_steps`` or
             ``max_wall_s`` (:class:`sms3d_env.training.schedules.WallAwareLinearSchedule`), so a
@@ -159,13 +163,13 @@ class TrainConfig:
             standard deviation of 1 on every normalised command; a residual starts quieter). With
             ``use_sde`` the log standard deviation of each weight of the noise's linear map: the
             noise on an action is then about ``exp(log_std_init)`` times the norm of the policy's
-            last hidden layer (≈ 8 for a trained 256-wide residual, session 24).
+            last hidden layer (≈ 8 for a trained 256-wide residual).
         use_sde: PPO: generalised state-dependent exploration (gSDE; Raffin et al. 2022, "Smooth
             exploration for robotic reinforcement learning", CoRL): the exploration noise is a
             linear function of the policy's last hidden layer whose weights are drawn every
             ``sde_sample_freq`` steps, so it stays the same while the state does. A stalled
             approach then fires the descend trigger at once or not at all for the draw, instead
-            of escaping by chance within a few steps (session 23), and not firing costs the
+            of escaping by chance within a few steps, and not firing costs the
             episode. An ``init_model`` with Gaussian noise starts the run with its networks and
             this run's noise (``log_std_init``, ``trigger_log_std``); one with gSDE noise keeps
             its own (``trigger_log_std`` still sets the trigger's).
@@ -177,7 +181,7 @@ class TrainConfig:
     """
 
     algo: str = "ppo"
-    env_id: str = "SMS3DPick-v0"
+    env_id: str = "SMS3DPick-v1"
     normalize: bool = False
     normalize_reward: bool = False
     scene_pool: int = 0
@@ -243,8 +247,8 @@ class TrainConfig:
             raise bad("reward_type", f"must be one of {REWARD_TYPES}")
         if self.env_id not in ENV_IDS:
             raise bad("env_id", f"must be one of {ENV_IDS}")
-        if self.env_id == "SMS3DPickTrain-v0" and self.reward_type != "dense":
-            raise bad("reward_type", "is set by SMS3DPickTrain-v0 (staged); leave it at its default")
+        if self.env_id in TRAIN_ENV_IDS and self.reward_type != "dense":
+            raise bad("reward_type", f"is set by {self.env_id} (staged); leave it at its default")
         if not isinstance(self.normalize, bool):
             raise bad("normalize", "must be a bool")
         if not isinstance(self.normalize_reward, bool):
@@ -344,23 +348,23 @@ class TrainConfig:
         if not (isinstance(self.reach_lateral_weight, (int, float)) and not isinstance(self.reach_lateral_weight, bool)
                 and math.isfinite(self.reach_lateral_weight) and self.reach_lateral_weight >= 1):
             raise bad("reach_lateral_weight", "must be a finite number >= 1")
-        if self.reach_lateral_weight != 1 and self.env_id == "SMS3DPick-v0" and self.reward_type != "staged":
-            raise bad("reach_lateral_weight", "shapes the staged reward only (use SMS3DPickTrain-v0 or "
+        if self.reach_lateral_weight != 1 and self.env_id in BASE_ENV_IDS and self.reward_type != "staged":
+            raise bad("reach_lateral_weight", "shapes the staged reward only (use SMS3DPickTrain-v1 or "
                                               "reward_type='staged')")
         if self.reward_pose not in REWARD_POSES:
             raise bad("reward_pose", f"must be one of {REWARD_POSES}")
-        if self.reward_pose != "estimate" and self.env_id == "SMS3DPick-v0" and self.reward_type == "sparse":
+        if self.reward_pose != "estimate" and self.env_id in BASE_ENV_IDS and self.reward_type == "sparse":
             raise bad("reward_pose", "shapes the dense and staged rewards; the sparse reward has none")
         if self.success_payoff not in SUCCESS_PAYOFFS:
             raise bad("success_payoff", f"must be one of {SUCCESS_PAYOFFS}")
-        if self.success_payoff != "time_left" and self.env_id == "SMS3DPick-v0" and self.reward_type != "staged":
-            raise bad("success_payoff", "sets the staged reward's success bonus (use SMS3DPickTrain-v0 or "
+        if self.success_payoff != "time_left" and self.env_id in BASE_ENV_IDS and self.reward_type != "staged":
+            raise bad("success_payoff", "sets the staged reward's success bonus (use SMS3DPickTrain-v1 or "
                                         "reward_type='staged')")
         if not isinstance(self.time_limit_terminal, bool):
             raise bad("time_limit_terminal", "must be a bool")
-        if self.time_limit_terminal and self.env_id == "SMS3DPick-v0":
+        if self.time_limit_terminal and self.env_id in BASE_ENV_IDS:
             raise bad("time_limit_terminal", "ends episodes at a limit the policy must see (the training id "
-                                             "SMS3DPickTrain-v0 observes the time since the reset)")
+                                             "SMS3DPickTrain-v1 observes the time since the reset)")
         if self.init_model is not None and not (isinstance(self.init_model, str) and self.init_model):
             raise bad("init_model", "must be None or the path of a saved model")
         if self.init_model is not None and self.algo != "ppo":
@@ -393,7 +397,7 @@ class TrainConfig:
         kw = env_kwargs(self.num_mushrooms, pose_source or self.pose_source,
                         self.pose_error_deg if pose_error_deg is None else pose_error_deg,
                         self.position_noise, self.reward_type, self.max_episode_steps)
-        if self.env_id != "SMS3DPick-v0":
+        if self.env_id in TRAIN_ENV_IDS:
             kw.pop("reward_type")  # the training id sets its own
         if self.pose_error_range_deg is not None and pose_error_deg is None:
             from sms3d_env.pose_sources import UniformNoisyPose

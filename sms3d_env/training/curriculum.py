@@ -3,7 +3,7 @@ the way to the pre-grasp pose (the env's ``pregrasp_start``) falls as the episod
 home succeed, so training moves to the start the policy is evaluated from once it has learned the
 pick from nearer starts.
 
-Measured why (benchmarks/RESULTS.md, session 10): with a fixed share of 0.75, PPO from scratch
+Measured why: with a fixed share of 0.75, PPO from scratch
 reached 70 % from home at 350k steps and then fell back to 40–50 % while three quarters of its
 episodes still began near the target.
 """

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 
-def make_env(env_id: str = "SMS3DPick-v0", residual_scale: float = 0.0, residual_until_held: bool = False,
+def make_env(env_id: str = "SMS3DPick-v1", residual_scale: float = 0.0, residual_until_held: bool = False,
              residual_approach_only: bool = False, residual_descend_trigger: bool = False,
              residual_trigger_only: bool = False, flat_observation: bool = False, time_limit_terminal: bool = False, **kwargs: Any) -> Any:
     """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``

@@ -14,11 +14,18 @@ Imitation Learning"): the scripted picker acts with Gaussian noise added to its 
 every visited state is labelled with the picker's *clean* action, so the clone sees (and learns to
 correct) states a little off the picker's own path. Only successful episodes are kept.
 
-``train_bc(BCConfig(...))`` writes into ``out``: ``demos.npz`` and ``dagger_<round>.npz`` (reused
-by a rerun), ``model.zip``, ``config.json`` (the env id and options the policy needs) and
-``summary.json``, each atomically. ``out`` is a run folder (:mod:`generator.run_folder`): a rerun
-with the same settings resumes (with the data saved so far) or, finished, does nothing; other
-settings are refused unless ``overwrite``.
+The demonstrations and every DAgger round's labelled episodes are Minari datasets
+(:mod:`sms3d_env.training.demonstrations`: the executed action in ``actions``, the picker's clean
+label in ``infos["expert_action"]``). ``BCConfig.demos`` names datasets to clone (e.g. recorded by
+``sms3d record-demos``); without it the recipe records its own.
+
+``train_bc(BCConfig(...))`` writes into ``out``: ``datasets/`` (a Minari datasets folder: its own
+demonstrations ``bc/demos-<k>-v0``, one per bed size, and the DAgger rounds
+``bc/dagger<round>-<k>-v0``, one per demonstration env; reused by a rerun), ``model.zip``,
+``config.json`` (the env id and options the policy needs) and ``summary.json``, each atomically.
+``out`` is a run folder (:mod:`generator.run_folder`): a rerun with the same settings resumes (with
+the datasets recorded so far) or, finished, does nothing; other settings are refused unless
+``overwrite``.
 """
 
 from __future__ import annotations
@@ -26,18 +33,18 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from generator.files import read_npz_made_with, save_npz_atomic, write_atomic
+from generator.files import write_atomic
 from generator.run_folder import open_run_folder
 from sms3d_env.training.config import POSTURE_TARGETS, check_bed_size, env_options
 from sms3d_env.training.model_files import finished_run, run_settings, save_model
 
-TRAIN_ENV_ID = "SMS3DPickTrain-v0"
+TRAIN_ENV_ID = "SMS3DPickTrain-v1"
 TEACHERS = ("estimate", "truth")
 
 
@@ -46,6 +53,11 @@ class BCConfig:
     """Demonstration collection and behaviour cloning settings.
 
     Args:
+        demos: Minari dataset ids (under ``MINARI_DATASETS_PATH``) whose labelled episodes to
+            clone, recorded on ``SMS3DPickTrain-v1`` with this ``posture_target`` (``sms3d
+            record-demos``); their envs also run the DAgger rounds. Empty (default): record the
+            demonstrations into ``out/datasets`` as the next five fields say (which are refused
+            with ``demos`` given).
         episodes: scripted episodes to run (failures are dropped), split evenly over
             ``num_mushrooms`` bed sizes; episode ``i`` uses ``reset(seed=seed + i)``.
         num_mushrooms: bed sizes the demonstrations cycle through.
@@ -73,6 +85,7 @@ class BCConfig:
             demonstration; the clone's own hovering states teach it the switch.
     """
 
+    demos: tuple[str, ...] = ()
     episodes: int = 400
     num_mushrooms: tuple[int, ...] = (10, 25)
     action_noise: float = 0.2
@@ -106,6 +119,15 @@ class BCConfig:
                 raise bad(name, "must be an integer >= 0")
         object.__setattr__(self, "num_mushrooms", tuple(self.num_mushrooms))
         object.__setattr__(self, "net_arch", tuple(self.net_arch))
+        object.__setattr__(self, "demos", tuple(self.demos))
+        if any(not isinstance(d, str) or not d for d in self.demos):
+            raise bad("demos", "must be Minari dataset ids")
+        if self.demos:
+            defaults = {f.name: f.default for f in fields(self)}
+            for name in RECORDING_FIELDS:
+                if getattr(self, name) != defaults[name]:
+                    raise bad(name, "sets the recording of demonstrations; with demos given they come from "
+                                    "those datasets")
         if not self.num_mushrooms:
             raise bad("num_mushrooms", "must be a non-empty sequence of bed sizes")
         for n in self.num_mushrooms:
@@ -135,139 +157,113 @@ class BCConfig:
         if not self.out:
             raise bad("out", "must be a non-empty path")
 
-    def demo_settings(self) -> dict[str, Any]:
-        """What the demonstrations depend on (a saved ``demos.npz`` is reused only if equal)."""
-        return {"episodes": self.episodes, "num_mushrooms": list(self.num_mushrooms),
-                "action_noise": self.action_noise, "pose_error_deg": self.pose_error_deg,
-                "seed": self.seed, "env_id": TRAIN_ENV_ID,
-                **({} if self.pose_error_range_deg is None and self.teacher == "estimate" else
-                   {"pose_error_range_deg": self.pose_error_range_deg, "teacher": self.teacher}),
-                **env_options(self.posture_target)}
 
-    def dagger_settings(self, round_: int) -> dict[str, Any]:
-        """What DAgger round ``round_``'s data depend on (everything before it, too)."""
-        return {**self.demo_settings(), "round": round_, "epochs": self.epochs,
-                "batch_size": self.batch_size, "learning_rate": self.learning_rate,
-                "net_arch": list(self.net_arch), "dagger_episodes": self.dagger_episodes,
-                "dagger_epochs": self.dagger_epochs}
+#: ``BCConfig`` fields that say how the recipe records its own demonstrations.
+RECORDING_FIELDS = ("episodes", "num_mushrooms", "action_noise", "pose_error_deg", "pose_error_range_deg")
 
 
 def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
                      pose_error_range_deg: tuple[float, float] | None = None,
                      posture_target: str = "estimate") -> dict[str, Any]:
     """``gym.make(TRAIN_ENV_ID, **kwargs)`` arguments for a bed size and pose error (fixed, or
-    drawn per episode in ``pose_error_range_deg``) and the IK posture option."""
-    import generator
-
-    kw: dict[str, Any] = {"scene_config": generator.SceneConfig().replace(
-        placement__num_mushrooms=int(num_mushrooms)), **env_options(posture_target)}
+    drawn per episode in ``pose_error_range_deg``) and the IK posture option; JSON, so that an
+    env spec made with them rebuilds the env (a Minari dataset's ``recover_environment``)."""
+    kw: dict[str, Any] = {"scene_config": {"placement": {"num_mushrooms": int(num_mushrooms)}},
+                          **env_options(posture_target)}
     if pose_error_range_deg is not None:
-        from sms3d_env.pose_sources import UniformNoisyPose
-
-        kw.update(pose_source=UniformNoisyPose(*pose_error_range_deg))
+        kw.update(pose_source="noisy", pose_error_range_deg=tuple(float(v) for v in pose_error_range_deg))
     elif pose_error_deg > 0:
         kw.update(pose_source="noisy", pose_error_deg=float(pose_error_deg))
     return kw
 
 
-def with_true_target(env: Any, obs: dict[str, np.ndarray], target: int) -> dict[str, np.ndarray]:
-    """``obs`` with the target's true cap top and stem axis in ``target_pose`` (what a privileged
-    teacher reads; the scripted picker reads nothing that depends on the estimate besides it)."""
-    inst = env.unwrapped.scene.instances[target]
-    return {**obs, "target_pose": np.concatenate([np.asarray(inst.cap_top, float),
-                                                  np.asarray(inst.rotation, float)[:, 2]])}
-
-
-def _rollouts(cfg: BCConfig, seeds: range, actor: Any = None, beta: float = 1.0,
-              desc: str = "demonstrations", progress: bool = True) -> dict[str, np.ndarray]:
-    """Episodes labelled with the scripted picker's clean actions.
-
-    The expert acts (with DART noise) in an episode with probability ``beta``, else ``actor``
-    does while the expert shadows it on the same observations (DAgger). Expert episodes are kept
-    only if they succeed; learner episodes keep every state the expert can label: not those
-    after the expert, never having seen the seal it waited for, gave up and turned to lifting.
-    Returns one array per observation key (steps, n), ``actions`` (steps, 7) and ``episode``."""
-    import gymnasium as gym
-    from tqdm import tqdm
-
-    import sms3d_env  # noqa: F401  (registers the env ids)
+def _teacher(teacher: str) -> Any:
+    """What builds ``teacher``'s expert on an episode's env (the scripted picker, or the privileged
+    teacher for ``"truth"``)."""
     from sms3d_env.pickers.privileged import PrivilegedTeacher
     from sms3d_env.pickers.scripted import ScriptedPicker
 
-    envs = [gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg, cfg.pose_error_range_deg,
-                                                    cfg.posture_target))
-            for n in cfg.num_mushrooms]
-    rng = np.random.default_rng([cfg.seed, seeds.start])
-    obs_rows: dict[str, list[np.ndarray]] = {}
-    actions: list[np.ndarray] = []
-    episode: list[int] = []
-    kept = 0
-    bar = tqdm(seeds, desc=desc, disable=not progress, unit="ep")
-    try:
-        for i, seed in enumerate(bar):
-            env = envs[i % len(envs)]
-            picker = ScriptedPicker.for_env(env) if cfg.teacher == "estimate" else PrivilegedTeacher(env)
-            expert_acts = actor is None or rng.random() < beta
-            obs, info = env.reset(seed=seed)
-            ep_obs, ep_act = [], []
-            done, sealed = False, False
-            while not done:
-                clean = (picker(obs) if cfg.teacher == "estimate" else
-                         picker(obs, with_true_target(env, obs, info["target"])))
-                sealed |= bool(obs["suction"][1] > 0.5)
-                if expert_acts:
-                    act = clean.copy()
-                    act[:6] += rng.normal(0.0, cfg.action_noise, 6).astype(np.float32)
-                else:
-                    act = actor(obs)
-                if expert_acts or picker.phase != "lift" or sealed:
-                    ep_obs.append(obs)
-                    ep_act.append(clean)
-                obs, _, terminated, truncated, info = env.step(np.clip(act, -1, 1))
-                done = terminated or truncated
-            if info["is_success"] or not expert_acts:
-                kept += 1
-                for o in ep_obs:
-                    for k, v in o.items():
-                        obs_rows.setdefault(k, []).append(np.asarray(v, np.float32))
-                actions += ep_act
-                episode += [seed] * len(ep_act)
-            bar.set_postfix(kept=kept)
-    finally:
-        for env in envs:
-            env.close()
-    if not actions:
-        raise RuntimeError("no demonstration succeeded: nothing to clone (check the env options)")
-    out = {k: np.stack(v) for k, v in obs_rows.items()}
-    out["actions"] = np.stack(actions).astype(np.float32)
-    out["episode"] = np.asarray(episode, np.int64)
-    return out
+    return ScriptedPicker.for_env if teacher == "estimate" else PrivilegedTeacher
 
 
-def collect_demonstrations(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
-    """The scripted picker's successful episodes (DART noise), seeds ``cfg.seed ..``."""
-    return _rollouts(cfg, range(cfg.seed, cfg.seed + cfg.episodes), progress=progress)
+def _record(cfg: BCConfig, targets: list[tuple[str, Any]], seeds: range, actor: Any = None, beta: float = 1.0,
+            desc: str = "demonstrations", progress: bool = True) -> list[Any]:
+    """Episodes ``seeds`` labelled by ``cfg.teacher`` into new datasets ``targets`` (``(id, env)``
+    pairs, episodes cycled over them): the expert acts with DART noise in an episode with
+    probability ``beta``, else ``actor`` does while the expert labels its states (DAgger)."""
+    from sms3d_env.training.demonstrations import record_datasets
+
+    return record_datasets(targets, _teacher(cfg.teacher), seeds,
+                           {"picker": "scripted" if cfg.teacher == "estimate" else "privileged teacher",
+                            "teacher": cfg.teacher, "made_by": "sms3d train-policy --recipe bc"},
+                           actor=actor, beta=beta, action_noise=cfg.action_noise,
+                           rng=np.random.default_rng([cfg.seed, seeds.start]), privileged=cfg.teacher == "truth",
+                           desc=desc, progress=progress)
 
 
-def _load_or_make(path: Path, meta: dict[str, Any], make: Any) -> dict[str, np.ndarray]:
-    """``path``'s arrays if it was written with ``meta``, else ``make()``'s, saved there."""
-    arrays = read_npz_made_with(path, meta)
-    if arrays is not None:
-        return arrays
-    arrays = make()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    save_npz_atomic(path, arrays, meta)
-    return arrays
+def _reuse_or_record(ids: list[str], record: Any) -> list[Any]:
+    """The datasets ``ids`` under Minari's current root if every one is complete (a rerun's),
+    else ``record()``'s, after removing what a cut recording left of them."""
+    from sms3d_env.training.demonstrations import delete_dataset, open_dataset, recording_of
+
+    if all(recording_of(i) is not None for i in ids):
+        return [open_dataset(i) for i in ids]
+    for i in ids:
+        delete_dataset(i)
+    return record()
 
 
-def load_or_collect(cfg: BCConfig, progress: bool = True) -> dict[str, np.ndarray]:
-    """``out/demos.npz`` if it was made with the same demonstration settings, else collected anew."""
-    return _load_or_make(Path(cfg.out) / "demos.npz", cfg.demo_settings(),
-                         lambda: collect_demonstrations(cfg, progress))
+def given_demos(cfg: BCConfig) -> list[Any]:
+    """The datasets ``cfg.demos`` (none: ``[]``), checked to be of the env the clone runs in:
+    ``TRAIN_ENV_ID`` with ``cfg.posture_target`` (``DatasetError`` naming the dataset)."""
+    from sms3d_env.training.demonstrations import DatasetError, open_dataset
+
+    datasets = [open_dataset(i) for i in cfg.demos]
+    for dataset_id, dataset in zip(cfg.demos, datasets, strict=True):
+        spec = dataset.env_spec
+        if spec is None or spec.id != TRAIN_ENV_ID:
+            raise DatasetError(f"dataset {dataset_id!r} was recorded on {getattr(spec, 'id', 'an env it cannot rebuild')}; "
+                               f"the bc recipe clones on {TRAIN_ENV_ID} (sms3d record-demos --env-id {TRAIN_ENV_ID})")
+        posture = spec.kwargs.get("posture_target", "estimate")
+        if posture != cfg.posture_target:
+            raise DatasetError(f"dataset {dataset_id!r} was recorded with posture_target={posture!r}; set "
+                               f"BCConfig.posture_target (--posture-target) to it")
+    return datasets
 
 
-def _concat(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    return {k: np.concatenate([a[k], b[k]]) for k in a}
+def own_demos(cfg: BCConfig, root: Path, progress: bool = True) -> list[Any]:
+    """The recipe's own demonstrations in the Minari folder ``root``: ``bc/demos-<k>-v0`` for the
+    ``k``-th bed size of ``cfg.num_mushrooms``, reused when complete."""
+    import gymnasium as gym
+
+    import sms3d_env  # noqa: F401  (registers the env ids)
+    from sms3d_env.training.demonstrations import minari_root
+
+    ids = [f"bc/demos-{k}-v0" for k in range(len(cfg.num_mushrooms))]
+    with minari_root(root):
+        return _reuse_or_record(ids, lambda: _record(
+            cfg, [(i, gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg, cfg.pose_error_range_deg,
+                                                                cfg.posture_target)))
+                  for i, n in zip(ids, cfg.num_mushrooms, strict=True)],
+            range(cfg.seed, cfg.seed + cfg.episodes), progress=progress))
+
+
+def dagger_round(cfg: BCConfig, round_: int, demo_sets: list[Any], actor: Any, root: Path,
+                 progress: bool = True) -> list[Any]:
+    """DAgger round ``round_``'s labelled episodes in the Minari folder ``root``:
+    ``bc/dagger<round_>-<k>-v0`` in the env of the ``k``-th demonstration dataset (its
+    ``recover_environment()``), the clone ``actor`` acting except with probability
+    ``0.5**round_``; reused when complete. Seeds from ``cfg.seed + 100000 × round_``, disjoint
+    from the demonstrations' and the evaluations'."""
+    from sms3d_env.training.demonstrations import minari_root
+
+    first = cfg.seed + 100_000 * round_
+    ids = [f"bc/dagger{round_}-{k}-v0" for k in range(len(demo_sets))]
+    with minari_root(root):
+        return _reuse_or_record(ids, lambda: _record(
+            cfg, [(i, d.recover_environment()) for i, d in zip(ids, demo_sets, strict=True)],
+            range(first, first + cfg.dagger_episodes), actor, beta=0.5**round_, desc=f"DAgger round {round_}",
+            progress=progress))
 
 
 def flat_observations(demos: dict[str, np.ndarray], keys: list[str]) -> np.ndarray:
@@ -331,46 +327,46 @@ def behaviour_clone(model: Any, demos: dict[str, np.ndarray], epochs: int, batch
 
 
 def train_bc(cfg: BCConfig, progress: bool = True, overwrite: bool = False) -> dict[str, Any]:
-    """Collect (or reuse) demonstrations, clone them, save ``model.zip`` + ``config.json`` +
+    """Record (or reuse) demonstrations, clone them, save ``model.zip`` + ``config.json`` +
     ``summary.json`` in ``cfg.out``; returns the summary. ``cfg.out`` is a run folder
     (``RunFolderError`` for one made with other settings, ``torch_threads`` aside, unless
-    ``overwrite``)."""
+    ``overwrite``); ``cfg.demos`` are checked before it opens (``DatasetError``)."""
     import gymnasium as gym
 
     import sms3d_env
+    from sms3d_env.training.demonstrations import complete_datasets, labelled_steps
     from sms3d_env.training.threads import torch_threads
 
+    demo_sets = given_demos(cfg)
     run = open_run_folder(cfg.out, run_settings(asdict(cfg)), overwrite=overwrite, may_change=("torch_threads",))
     out = run.path
+    root = out / "datasets"
     if run.resumed:
         finished = finished_run(out)
         if finished is not None:
             return finished
-        saved = [p.name for p in sorted(out.glob("*.npz")) if ".tmp" not in p.suffixes]  # no killed write's
-        print(f"resuming {out}: reusing {', '.join(saved) if saved else 'no saved data yet'}")
+        saved = complete_datasets(root)
+        print(f"resuming {out}: reusing {', '.join(saved) if saved else 'no recorded dataset yet'}")
     with torch_threads(cfg.torch_threads):
         t0 = time.perf_counter()
-        demos = load_or_collect(cfg, progress)
-        t_demo = time.perf_counter() - t0
+        demo_sets = demo_sets or own_demos(cfg, root, progress)
         env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(cfg.num_mushrooms[0], posture_target=cfg.posture_target))
+        keys = list(env.observation_space.spaces)
+        demos = labelled_steps(demo_sets, keys)
+        t_demo = time.perf_counter() - t0
         try:
             model = build_policy_model(env, demos, cfg.net_arch, cfg.log_std, cfg.seed)
         finally:
             env.close()
         losses = behaviour_clone(model, demos, cfg.epochs, cfg.batch_size, cfg.learning_rate,
                                  cfg.seed, progress)
-        data = demos
+        data, labelled = demos, list(demo_sets)
         for r in range(1, cfg.dagger_rounds + 1):
             def actor(obs: dict[str, np.ndarray]) -> np.ndarray:
                 return model.predict(obs, deterministic=True)[0]
 
-            first = cfg.seed + 100_000 * r  # disjoint from the demonstrations and evaluations
-            labelled = _load_or_make(
-                Path(cfg.out) / f"dagger_{r}.npz", cfg.dagger_settings(r),
-                lambda first=first, actor=actor, r=r: _rollouts(
-                    cfg, range(first, first + cfg.dagger_episodes), actor, beta=0.5**r,
-                    desc=f"DAgger round {r}", progress=progress))
-            data = _concat(data, labelled)
+            labelled += dagger_round(cfg, r, demo_sets, actor, root, progress)
+            data = labelled_steps(labelled, keys)
             losses += behaviour_clone(model, data, cfg.dagger_epochs, cfg.batch_size,
                                       cfg.learning_rate, cfg.seed + r, progress)
         wall = time.perf_counter() - t0
@@ -380,7 +376,8 @@ def train_bc(cfg: BCConfig, progress: bool = True, overwrite: bool = False) -> d
               **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
     write_atomic(out / "config.json", json.dumps(config, indent=2))
     save_model(model, out / "model.zip")
-    summary = {"recipe": "bc", "demo_episodes": cfg.episodes,
+    summary = {"recipe": "bc", "demos": [d.spec.dataset_id for d in demo_sets],
+               "demo_episodes": int(sum(d.total_episodes for d in demo_sets)),
                "demo_episodes_kept": int(len(np.unique(demos["episode"]))),
                "demo_steps": int(len(demos["actions"])), "dagger_rounds": cfg.dagger_rounds,
                "training_steps": int(len(data["actions"])), "final_loss": losses[-1],

@@ -10,26 +10,27 @@ policy knows what it corrects. An all-zero residual is the scripted picker exact
 starts from its success rate; PPO's action head starts near zero (orthogonal init, gain 0.01).
 With ``until_held`` the residual corrects only the approach and touch-down: while the vacuum
 sensor reports a seal (a hand: two fingers holding), the scripted picker's twist and lift run
-alone, and the residual is back if the seal is lost (session 9: a residual over the whole episode lost grips the scripted picker kept).
+alone, and the residual is back if the seal is lost (measured: a residual over the whole
+episode lost grips the scripted picker kept).
 With ``approach_only`` it corrects only the approach to the stand-off point: from the scripted
-picker's descent on, its slow touch-down, twist and lift run alone (session 18: a residual until
+picker's descent on, its slow touch-down, twist and lift run alone (measured: a residual until
 held learned to descend about twice as fast, and at 30 deg of pose error 22 of 100 seals were
 overloaded and lost within 1-3 steps of forming).
 With ``descend_trigger`` the action gains an eighth entry: above :data:`DESCEND_TRIGGER` while
 the scripted picker approaches and its tool is within :data:`DESCEND_TRIGGER_RADIUS_M` of the
-stand-off point, it starts the descent from where the tool is (session 19: under 20-30 deg of pose
+stand-off point, it starts the descent from where the tool is (measured: under 20-30 deg of pose
 error the scripted approach stalls short of its 3 mm / 3 deg tolerance, and a hand-written escape
 from such stalls won 7 of 100 paired episodes at 20 deg; the trigger lets the policy learn when
 to give up on the approach, from what it sees: joint velocities, its command, the tool offset).
 With ``trigger_only`` the action is the trigger alone: the scripted picker's command runs
-unchanged and the policy decides only when its approach gives way to the descent (session 24: the
+unchanged and the policy decides only when its approach gives way to the descent (measured: the
 residual's seven continuous entries changed trajectories in every episode, and their noise swapped
 about as many picks each way as the trigger won at 30 deg).
 A policy whose trigger entry has mean 0 (an untrained one, run deterministically) never fires
 it; in training PPO explores it with its own, wider noise (:data:`DESCEND_TRIGGER_LOG_STD_INIT`).
 With the trigger the observation also gains ``approach_motion``: the tool's distance from the
 stand-off point and how far the tool moved over the last :data:`MOTION_WINDOW_STEPS` control
-steps (session 21: a trigger that saw only this step's joint velocities learned to cut approaches
+steps (measured: a trigger that saw only this step's joint velocities learned to cut approaches
 short 5-20 mm out rather than to detect a stall, which is "commanding motion and not moving over
 0.4 s"). Both come from the arm's forward kinematics and the estimated pose, as on a real robot.
 """
@@ -45,20 +46,21 @@ from gymnasium import spaces
 
 #: The trigger entry's value above which the descent starts (actions are in [-1, 1]).
 DESCEND_TRIGGER = 0.5
-#: How near the stand-off point (m) the trigger acts: the radius of session 19's stall escape.
+#: How near the stand-off point (m) the trigger acts: the radius of the hand-written stall escape
+#: that won 7 of 100 paired episodes at 20 deg (``benchmarks/bench_tolerance_headroom.py``).
 DESCEND_TRIGGER_RADIUS_M = 0.02
 #: PPO's initial log standard deviation of the trigger entry (sigma 0.4: above the threshold on
 #: about 11 % of steps). The residual's own entries start at -1.6 (sigma 0.2), where the trigger
 #: would fire on 0.6 % of steps and a stall would rarely be escaped often enough to learn from;
 #: a deterministic policy (the mean, 0 at the start) never fires it until it has learned to.
-#: Session 23: at 0.4 a stochastic policy escapes every stall by chance within a few steps, so
+#: Measured: at 0.4 a stochastic policy escapes every stall by chance within a few steps, so
 #: firing at once in a stall earns little and the mean stays below the threshold; ``sms3d
 #: train-policy --trigger-log-std`` sets it lower.
 DESCEND_TRIGGER_LOG_STD_INIT = -0.9
 #: The trigger's index in the action: the last entry (after the residual's seven, or alone).
 DESCEND_TRIGGER_ENTRY = -1
-#: Control steps over which ``approach_motion`` measures the tool's displacement: session 19's
-#: stall escape window (0.4 s at the env's 25 Hz control).
+#: Control steps over which ``approach_motion`` measures the tool's displacement: the hand-written
+#: stall escape's window (0.4 s at the env's 25 Hz control).
 MOTION_WINDOW_STEPS = 10
 
 

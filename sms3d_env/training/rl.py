@@ -48,7 +48,7 @@ from sms3d_env.training.model_files import (
     run_settings,
     save_model,
 )
-from sms3d_env.training.schedules import WallAwareLinearSchedule, trigger_noise_schedule
+from sms3d_env.training.schedules import falling_rate, trigger_noise_schedule
 from sms3d_env.training.warmup import critic_warmup
 
 
@@ -62,13 +62,11 @@ def _tensorboard_available() -> bool:
 
 def _build_model(cfg: TrainConfig, env: Any) -> Any:
     from stable_baselines3 import PPO, SAC
-    from stable_baselines3.common.utils import LinearSchedule
 
     rate: Any = cfg.learning_rate
-    if cfg.learning_rate_by_wall:
-        rate = WallAwareLinearSchedule(cfg.learning_rate, cfg.learning_rate_final, cfg.max_wall_s)
-    elif cfg.learning_rate_final is not None:
-        rate = LinearSchedule(cfg.learning_rate, cfg.learning_rate_final, end_fraction=1.0)
+    if cfg.learning_rate_final is not None:
+        rate = falling_rate(cfg.learning_rate, cfg.learning_rate_final,
+                            cfg.max_wall_s if cfg.learning_rate_by_wall else None)
     policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": float(cfg.log_std_init)}
     policy = "MlpPolicy" if cfg.flat_observation else "MultiInputPolicy"
     if cfg.algo == "ppo":
@@ -360,7 +358,9 @@ def _evaluation(eval_env: Any, env: Any, out: Path, cfg: TrainConfig, resumed_at
     return _Evaluation()
 
 
-def _wall_clock_callback(max_wall_s: float) -> Any:
+def wall_clock_limit(max_wall_s: float) -> Any:
+    """An SB3 callback that stops training once ``max_wall_s`` seconds have passed since it began
+    (``TrainConfig.max_wall_s``; an RL Zoo recipe names it as a ``callback``)."""
     from stable_baselines3.common.callbacks import BaseCallback
 
     class _StopAfter(BaseCallback):
@@ -474,7 +474,7 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
         if cfg.trigger_log_std_final is not None:
             callbacks.append(trigger_noise_schedule(cfg.trigger_log_std, cfg.trigger_log_std_final, cfg.max_wall_s))
         if cfg.max_wall_s is not None:
-            callbacks.append(_wall_clock_callback(cfg.max_wall_s))
+            callbacks.append(wall_clock_limit(cfg.max_wall_s))
         t0 = time.perf_counter()
         # SB3 adds the steps already made to total_timesteps, so schedules run over the whole run.
         model.learn(total_timesteps=cfg.total_steps - start, callback=CallbackList(callbacks),

@@ -2,8 +2,8 @@
 and the descend trigger's exploration noise.
 
 SB3 drives a schedule by ``progress_remaining``, the share of ``total_steps`` still to run. A run
-stopped by ``max_wall_s`` never sees the end of that schedule: measured (benchmarks/RESULTS.md,
-session 14) a rate meant to fall from 3e-4 to 3e-5 over 3.2M steps was still 8.4e-5 when the 2 h
+stopped by ``max_wall_s`` never sees the end of that schedule: measured, a rate meant to fall
+from 3e-4 to 3e-5 over 3.2M steps was still 8.4e-5 when the 2 h
 limit stopped it at 2.62M, because the machine's share of CPU set the step rate, not the command.
 """
 
@@ -56,13 +56,43 @@ class WallAwareLinearSchedule:
         return {**self.__dict__, "_t0": None, "clock": time.perf_counter}
 
 
+def falling_rate(start: float, end: float, max_wall_s: float | None = None) -> Callable[[float], float]:
+    """A value falling linearly from ``start`` to ``end`` over the run's steps (SB3's
+    ``LinearSchedule``) or, with ``max_wall_s``, over whichever ends first, the steps or that
+    many seconds (:class:`WallAwareLinearSchedule`)."""
+    from stable_baselines3.common.utils import LinearSchedule
+
+    return (LinearSchedule(start, end, end_fraction=1.0) if max_wall_s is None
+            else WallAwareLinearSchedule(start, end, max_wall_s))
+
+
+def falling_learning_rate(final: float, max_wall_s: float | None = None) -> Any:
+    """An SB3 callback: from the start of training, the model's learning rate falls linearly
+    from its initial value to ``final`` (:func:`falling_rate`, over the steps or with
+    ``max_wall_s`` whichever ends first): the schedule of ``sms3d train-policy
+    --learning-rate-final`` (``--learning-rate-by-wall``), for recipes that cannot build it into
+    the model, such as an RL Zoo hyperparameter file (whose ``lin_`` rates fall to 0)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _FallingLearningRate(BaseCallback):
+        def _on_training_start(self) -> None:
+            schedule = falling_rate(float(self.model.lr_schedule(1.0)), float(final), max_wall_s)
+            schedule(1.0)  # a wall-aware schedule's clock starts at its first call: now, as training does
+            self.model.learning_rate = self.model.lr_schedule = schedule
+
+        def _on_step(self) -> bool:
+            return True
+
+    return _FallingLearningRate()
+
+
 def trigger_noise_schedule(start: float, end: float, max_wall_s: float | None) -> Any:
     """An SB3 callback: before each rollout, set the descend trigger's log standard deviation
     (``residual.set_trigger_log_std``) on a line from ``start`` to ``end`` over the run (by steps, or
     with ``max_wall_s`` over whichever runs out first, as :class:`WallAwareLinearSchedule`), and
     log it as ``train/trigger_log_std``.
 
-    Why (benchmarks/RESULTS.md, session 23): trained at a fixed noise of 0.4, the trigger is
+    Why (measured): trained at a fixed noise of 0.4, the trigger is
     fired *by chance* within a few steps of any stall, so its mean needs no more than that (0.23
     in stalled steps against the 0.5 that fires) and the deterministic policy never fires.
     Shrinking the noise is meant to raise the mean to the threshold, where the stochastic and
@@ -71,10 +101,8 @@ def trigger_noise_schedule(start: float, end: float, max_wall_s: float | None) -
     rose).
     """
     from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.utils import LinearSchedule
 
-    schedule: Callable[[float], float] = (LinearSchedule(start, end, end_fraction=1.0) if max_wall_s is None
-                                          else WallAwareLinearSchedule(start, end, max_wall_s))
+    schedule = falling_rate(start, end, max_wall_s)
 
     class _TriggerNoise(BaseCallback):
         def _on_rollout_start(self) -> None:

@@ -8,7 +8,7 @@ the step that reaches it ends the episode (Pardo et al. 2018, "Time Limits in Re
 Learning", ICML: for a time-aware agent the limit is a terminal state). Bootstrapped there, an
 approach that stalls until the limit is valued like the stalled states before it, which are
 escaped by chance during training: waiting costs the critic nothing, and the residual's descend
-trigger has no reason to fire in a stall (session 24, RESULTS).
+trigger has no reason to fire in a stall.
 """
 
 from __future__ import annotations

@@ -5,9 +5,9 @@ optimization"), distilled into a stable-baselines3 policy.
 
 Why not PPO: the trigger's decision matters in a few percent of episodes (approach stalls under
 20-30 deg of pose error), and PPO's advantage of firing is estimated from returns that differ by
-a whole success between unrelated episodes. Sessions 21-25 trained it in eleven runs; each run
-learned to fire on every entry into the trigger's radius or hardly fired at all, and none beat the
-scripted picker at 30 deg (``benchmarks/RESULTS.md``). Here each label is a
+a whole success between unrelated episodes. In eleven PPO runs it learned to fire on every entry
+into the trigger's radius or hardly fired at all, and none beat the scripted picker at 30 deg
+(docs/results-training.md). Here each label is a
 *paired* comparison: a seeded episode replays exactly, so firing at step ``t`` and never firing
 differ by that firing alone.
 
@@ -78,6 +78,7 @@ class TriggerConfig:
         pose_error_range_deg: (low, high): each episode's orientation error is drawn uniformly
             in it (degrees).
         posture_target: the IK posture option (``sms3d_env.training.config.POSTURE_TARGETS``).
+        robot: the robot the trigger acts on (``sms3d_env.robots.ROBOTS``).
         candidates: most replays per episode (steps where the trigger can act, evenly spread).
         margin: the expected gain of firing (success probability, 0-1) the policy needs to fire.
         net_arch, epochs, batch_size, learning_rate: the regression's network and optimiser.
@@ -91,6 +92,7 @@ class TriggerConfig:
     num_mushrooms: int = 25
     pose_error_range_deg: tuple[float, float] = (15.0, 35.0)
     posture_target: str = "tool"
+    robot: str = "gantry"
     candidates: int = 10
     margin: float = 0.15
     net_arch: tuple[int, ...] = (256, 256)
@@ -117,6 +119,10 @@ class TriggerConfig:
             raise bad("pose_error_range_deg", "must be (low, high) degrees with 0 <= low <= high <= 90")
         if self.posture_target not in POSTURE_TARGETS:
             raise bad("posture_target", f"must be one of {POSTURE_TARGETS}")
+        from sms3d_env.robot_names import ROBOTS
+
+        if self.robot not in ROBOTS:
+            raise bad("robot", f"must be one of {ROBOTS}")
         if not (isinstance(self.margin, (int, float)) and math.isfinite(self.margin) and -1 < self.margin < 1):
             raise bad("margin", "must be a number in (-1, 1) (a gain in success probability)")
         if not (isinstance(self.learning_rate, (int, float)) and math.isfinite(self.learning_rate)
@@ -129,18 +135,23 @@ class TriggerConfig:
         """What the label file of episodes ``first .. stop - 1`` holds and depends on: a file made
         with other settings, or for other episodes, is not reused for it."""
         return {"num_mushrooms": self.num_mushrooms, "pose_error_range_deg": list(self.pose_error_range_deg),
-                "posture_target": self.posture_target, "candidates": self.candidates, "episodes": [first, stop]}
+                "posture_target": self.posture_target, "robot": self.robot, "candidates": self.candidates,
+                "episodes": [first, stop]}
+
+    def env_options(self) -> dict[str, Any]:
+        """The options beyond the training id's defaults that the trigger acts (and must run) with."""
+        return {**env_options(self.posture_target), **({"robot": self.robot} if self.robot != "gantry" else {})}
 
 
 def trigger_env(cfg: TriggerConfig) -> Any:
-    """The env the trigger acts in: ``SMS3DPickTrain-v0`` inside a trigger-only residual (the
+    """The env the trigger acts in: ``SMS3DPickTrain-v1`` inside a trigger-only residual (the
     ``ResidualPicker`` is the outermost wrapper)."""
     from sms3d_env.training.envs import make_env
     from sms3d_env.training.imitation import TRAIN_ENV_ID, train_env_kwargs
 
     return make_env(TRAIN_ENV_ID, TRIGGER_ONLY_SCALE, residual_descend_trigger=True, residual_trigger_only=True,
                     **train_env_kwargs(cfg.num_mushrooms, pose_error_range_deg=cfg.pose_error_range_deg,
-                                       posture_target=cfg.posture_target))
+                                       posture_target=cfg.posture_target) | cfg.env_options())
 
 
 def _episode(env: Any, seed: int, fire_at: int | None = None,
@@ -302,7 +313,7 @@ def train_trigger(cfg: TriggerConfig, progress: bool = True, overwrite: bool = F
     from sms3d_env.training.residual import DESCEND_TRIGGER
 
     config = {"recipe": "trigger-rollouts", "algo": "ppo", "env_id": TRAIN_ENV_ID,
-              "env_options": {**sms3d_env.TRAIN_OPTIONS, **env_options(cfg.posture_target)},
+              "env_options": {**sms3d_env.TRAIN_OPTIONS, **cfg.env_options()},
               "max_episode_steps": 250, "residual_scale": TRIGGER_ONLY_SCALE,
               "residual_descend_trigger": True, "residual_trigger_only": True,
               **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}

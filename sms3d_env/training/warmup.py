@@ -3,8 +3,8 @@ function first learns the returns of the policy it starts from.
 
 Why: a residual starts as the scripted picker (its action head outputs ≈ 0), but its critic
 starts untrained, so the first advantages are noise and PPO moves a working controller at random
-(session 14: training success under 15–30° pose errors fell from 0.79 to 0.70 as the residual
-trained). Ma et al. 2026 ("What Makes Value Learning Efficient in Residual Reinforcement
+(measured: training success under 15–30° pose errors fell from 0.79 to 0.70 as a residual
+trained without it). Ma et al. 2026 ("What Makes Value Learning Efficient in Residual Reinforcement
 Learning?", arXiv:2602.10539) name this the critic's cold start and anchor the value on the base
 policy's own transitions before the residual learns; this is that warm-up for on-policy PPO, whose
 rollouts while the actor is frozen are the base policy's (plus the residual's exploration noise).

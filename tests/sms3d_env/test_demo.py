@@ -23,9 +23,17 @@ def test_the_demo_writes_its_pictures_and_picks_from_pixels(tmp_path, capsys):
     for name in ("scene.png", "perception.png", *(file for _, _, file in PICKS)):
         image = cv2.imread(str(tmp_path / name))
         assert image is not None and image.size > 0, name
-    assert cv2.imread(str(tmp_path / "perception.png")).shape[:2] == (480, 640)
+    height, width = cv2.imread(str(tmp_path / "perception.png")).shape[:2]
+    assert height > 480 and width > 640  # the 640 x 480 render with its title and legend
+    for _, _, name in PICKS:
+        # Six 240 x 320 frames in two rows of three under a title bar, and the whole pick as MP4.
+        height, width = cv2.imread(str(tmp_path / name)).shape[:2]
+        assert width == 3 * 320 and 2 * 240 < height < 2 * 240 + 60, name
+        video = cv2.VideoCapture(str(tmp_path / name.replace(".png", ".mp4")))
+        ok, frame = video.read()
+        assert ok and frame.shape == (240, 320, 3), name
     out = capsys.readouterr().out
-    assert "mushrooms estimated" in out and "poses from pixels" in out
+    assert "mushrooms estimated" in out and "poses from pixels" in out and "video: " in out
 
 
 @pytest.mark.parametrize("flags, named", [

@@ -113,7 +113,7 @@ def test_pickle_round_trip(tool):
 @pytest.mark.parametrize("tool", ["suction", "hand"])
 @pytest.mark.parametrize("mode", ["rgb_array", "depth_array"])
 def test_render_modes(mode, tool):
-    env = make(render_mode=mode, render_size=(48, 64), tool=tool)
+    env = make(render_mode=mode, render_size=(48, 64), tool=tool, camera="overhead")
     env.reset(seed=0)
     img = env.render()
     if mode == "rgb_array":

@@ -242,7 +242,7 @@ def test_sweep_compare_keeps_two_sweeps_of_one_picker(tmp_path, capsys):
     assert main(["sweep-compare", str(tmp_path / "default"), str(tmp_path / "tool"),
                  "--out", str(tmp_path / "cmp.png")]) == 0
     table = capsys.readouterr().out
-    assert "| scripted | 0° |" in table and "| scripted (tool) | 0° |" in table
+    assert "| scripted picker | 0° |" in table and "| scripted picker (tool) | 0° |" in table
     assert (tmp_path / "cmp.png").stat().st_size > 0
 
 
@@ -330,11 +330,26 @@ def test_sweep_compare_refuses_a_sweep_without_the_default_physics(tmp_path, cap
     assert f"{tight} holds no episodes of the noisy pose source with the default physics" in err
 
 
+def test_sweep_compare_names_the_shipped_pickers_as_the_documentation_does(tmp_path, capsys, monkeypatch):
+    # The descend-trigger figure's legend said "residual" where the text says "learned descend trigger".
+    import sms3d_env.study.figures as figures
+
+    legends = []
+    monkeypatch.setattr(figures, "save_figure",
+                        lambda fig, path: legends.append([t.get_text() for t in fig.axes[0].get_legend().get_texts()]))
+    folders = [_sweep_folder(tmp_path / name, picker=name) for name in ("scripted", "residual", "policy")]
+    assert main(["sweep-compare", *map(str, folders), "--out", str(tmp_path / "cmp.png")]) == 0
+    table = capsys.readouterr().out
+    names = ("scripted picker", "learned descend trigger", "shipped policy")
+    assert [label.split(" (n = ")[0] for label in legends[0]] == list(names)
+    assert all(f"| {name} | 10° |" in table for name in names), table
+
+
 def test_sweep_compare_labels_sweeps_of_one_name_by_their_paths(tmp_path, capsys):
     folders = [_sweep_folder(tmp_path / parent / "run") for parent in ("x", "y", "z")]
     assert main(["sweep-compare", *map(str, folders), "--out", str(tmp_path / "cmp.png")]) == 0
     table = capsys.readouterr().out
-    for label in ("scripted", "scripted (y/run)", "scripted (z/run)"):
+    for label in ("scripted picker", "scripted picker (y/run)", "scripted picker (z/run)"):
         assert f"| {label} | 10° | 3/4 = 75.0 % |" in table, table
     assert "nan" not in table
     assert (tmp_path / "cmp.png").stat().st_size > 0

@@ -13,13 +13,8 @@ import sms3d_env  # noqa: F401  (registers the env ids)
 from sms3d_env.pickers.privileged import PrivilegedTeacher
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.pose_sources import UniformNoisyPose
-from sms3d_env.training.imitation import (
-    TRAIN_ENV_ID,
-    BCConfig,
-    _rollouts,
-    train_env_kwargs,
-    with_true_target,
-)
+from sms3d_env.training.demonstrations import labelled_steps, minari_root, with_true_target
+from sms3d_env.training.imitation import TRAIN_ENV_ID, BCConfig, _record, train_env_kwargs
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -42,18 +37,25 @@ def test_with_true_target_replaces_only_the_estimate():
 
 
 def test_the_pose_error_range_draws_a_uniform_noisy_source():
-    kw = train_env_kwargs(8, pose_error_range_deg=(5.0, 25.0))
-    assert isinstance(kw["pose_source"], UniformNoisyPose)
-    assert (kw["pose_source"].low_deg, kw["pose_source"].high_deg) == (5.0, 25.0)
+    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_range_deg=(5.0, 25.0)))
+    try:
+        source = env.unwrapped.pose_source
+        assert isinstance(source, UniformNoisyPose) and (source.low_deg, source.high_deg) == (5.0, 25.0)
+        env.spec.to_json()  # JSON: a dataset recorded in this env rebuilds it
+    finally:
+        env.close()
     assert "pose_source" not in train_env_kwargs(8)
 
 
 @pytest.mark.parametrize("teacher", ["estimate", "truth"])
-def test_the_clone_sees_the_estimate_and_the_approach_is_labelled_from_it(teacher):
+def test_the_clone_sees_the_estimate_and_the_approach_is_labelled_from_it(teacher, tmp_path):
     """The learner (here: standing still) acts, the teacher labels; both teachers approach the
     *estimated* stand-off point (a switch the clone can see), and the clone sees the estimate."""
     cfg = BCConfig(episodes=1, num_mushrooms=(8,), pose_error_deg=30.0, teacher=teacher, out="unused")
-    demos = _rollouts(cfg, range(3, 4), actor=lambda obs: np.zeros(7, np.float32), beta=0.0, progress=False)
+    with minari_root(tmp_path):
+        recorded = _record(cfg, [("bc/learner-v0", gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0)))],
+                           range(3, 4), actor=lambda obs: np.zeros(7, np.float32), beta=0.0, progress=False)
+    demos = labelled_steps(recorded, ["target_pose"])
     env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
     try:
         obs, _ = env.reset(seed=3)
@@ -107,9 +109,3 @@ def test_a_fixed_error_and_a_range_exclude_each_other_and_teachers_are_named():
     with pytest.raises(ValueError, match="teacher"):
         BCConfig(teacher="oracle")
 
-
-def test_the_privileged_settings_change_what_demonstrations_are_reused_for():
-    plain = BCConfig(pose_error_deg=10.0)
-    assert plain.demo_settings() == BCConfig(pose_error_deg=10.0, teacher="estimate").demo_settings()
-    assert BCConfig(pose_error_deg=10.0, teacher="truth").demo_settings() != plain.demo_settings()
-    assert BCConfig(pose_error_range_deg=(0, 30)).demo_settings() != BCConfig().demo_settings()

@@ -28,7 +28,7 @@ def test_bc_recipe_writes_a_policy_that_loads_and_acts(bc_run):
     out, cfg, summary = bc_run
     assert summary["demo_episodes_kept"] >= 1 and summary["training_steps"] > summary["demo_steps"]
     saved = json.loads((out / "config.json").read_text())
-    assert saved["env_id"] == "SMS3DPickTrain-v0" and saved["env_options"]["suction_mode"] == "latched"
+    assert saved["env_id"] == "SMS3DPickTrain-v1" and saved["env_options"]["suction_mode"] == "latched"
     actor = PolicyActor(out / "model.zip")
     env, picker = make_picker_env(parse_picker(f"policy:{out / 'model.zip'}"))
     obs, _ = env.reset(seed=0)
@@ -40,11 +40,20 @@ def test_bc_recipe_writes_a_policy_that_loads_and_acts(bc_run):
     assert features.mean.shape[0] == sum(np.prod(s.shape) for s in env.observation_space.spaces.values())
 
 
-def test_a_rerun_reuses_the_demonstrations_and_the_dagger_data(bc_run):
-    out, cfg, _ = bc_run
-    before = {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz")}
-    train_bc(cfg, progress=False)
-    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz")} == before
+def test_a_rerun_reuses_the_demonstrations_and_the_dagger_data(bc_run, capsys, tmp_path):
+    import shutil
+
+    out, cfg, summary = bc_run
+    killed = tmp_path / "killed"  # the run as if killed after its datasets were recorded
+    shutil.copytree(out, killed)
+    (killed / "summary.json").unlink()
+    datasets = sorted(killed.glob("datasets/bc/*/data/main_data.hdf5"))
+    assert [p.parents[1].name for p in datasets] == ["dagger1-0-v0", "demos-0-v0"]
+    before = {p: p.stat().st_mtime_ns for p in datasets}
+    resumed = train_bc(BCConfig(**{**cfg.__dict__, "out": str(killed)}), progress=False)
+    assert "reusing bc/dagger1-0-v0, bc/demos-0-v0" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in datasets} == before
+    assert (resumed["demo_steps"], resumed["training_steps"]) == (summary["demo_steps"], summary["training_steps"])
 
 
 def test_a_rerun_with_other_settings_is_refused_and_keeps_the_model(bc_run, capsys):
@@ -67,7 +76,7 @@ def test_eval_policy_prints_the_success_line(bc_run, capsys):
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert last.startswith("success ") and "/2 (" in last and "95 % CI" in last
     res = json.loads((out / "eval.json").read_text())
-    assert len(res["per_episode"]) == 2 and res["env_id"] == "SMS3DPickTrain-v0"
+    assert len(res["per_episode"]) == 2 and res["env_id"] == "SMS3DPickTrain-v1"
 
 
 def test_eval_policy_names_a_missing_model(capsys, tmp_path):
@@ -110,7 +119,7 @@ def test_sweep_runs_a_learned_picker_on_the_same_episodes(bc_run, tmp_path):
 def test_the_shipped_policy_loads_and_was_trained_on_the_training_id():
     assert SHIPPED_POLICY.is_file(), "sms3d_env/weights/pick_policy/model.zip is not in the package"
     actor = PolicyActor(SHIPPED_POLICY)
-    assert actor.env_id == "SMS3DPickTrain-v0"
+    assert actor.env_id == "SMS3DPickTrain-v1"
     metrics = json.loads((SHIPPED_POLICY.parent / "metrics.json").read_text())
     assert metrics["oracle"]["successes"] / metrics["oracle"]["episodes"] >= 0.5
 

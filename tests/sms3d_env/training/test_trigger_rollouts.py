@@ -20,9 +20,11 @@ from sms3d_env.training.trigger_rollouts import (
     trigger_env,
 )
 
-# 8-mushroom beds at 30 deg: seed 14's scripted episode fails and firing at the first step within
-# the trigger's reach rescues it; seed 0's succeeds and firing early loses it (found by a search).
-SMALL = dict(num_mushrooms=8, pose_error_range_deg=(30.0, 30.0), candidates=4)
+# The Jaco on 8-mushroom beds at 30 deg (on the gantry no seed of 0-149 had a label other than 0:
+# its scripted picker does not stall): seed 4's scripted episode fails and firing at the first
+# step within the trigger's reach rescues it; seed 104's succeeds and firing early loses it (found
+# by a search).
+SMALL = dict(num_mushrooms=8, pose_error_range_deg=(30.0, 30.0), candidates=4, robot="jaco")
 
 
 def _replay(env, seed, fire_at):
@@ -40,21 +42,21 @@ def _replay(env, seed, fire_at):
 def test_each_label_is_the_paired_gain_of_firing_at_that_step():
     env = trigger_env(TriggerConfig(**SMALL))
     try:
-        for seed, expected in ((14, [1, 0, 0, 0]), (0, [-1, -1, 0, 0])):
+        for seed, expected in ((4, [1, 1, 0, 0]), (104, [-1, -1, 0, 0])):
             observations, labels, base = label_episode(env, seed, candidates=4)
             assert labels == expected
             assert base == _replay(env, seed, fire_at=None)
             # Every labelled state is one where the trigger can act: within its reach.
             assert all(o["approach_motion"][0] < DESCEND_TRIGGER_RADIUS_M for o in observations)
-        # The first candidate is the first step within reach: firing there rescues seed 14.
-        obs, _ = env.reset(seed=14)
+        # The first candidate is the first step within reach: firing there rescues seed 4.
+        obs, _ = env.reset(seed=4)
         step = 0
         while obs["approach_motion"][0] >= DESCEND_TRIGGER_RADIUS_M:
             obs, *_ = env.step(np.array([-1.0], np.float32))
             step += 1
-        assert _replay(env, 14, fire_at=step) and not _replay(env, 14, fire_at=None)
-        again = label_episode(env, 14, candidates=4)
-        np.testing.assert_array_equal(again[0][0]["tool_pose"], label_episode(env, 14, 4)[0][0]["tool_pose"])
+        assert _replay(env, 4, fire_at=step) and not _replay(env, 4, fire_at=None)
+        again = label_episode(env, 4, candidates=4)
+        np.testing.assert_array_equal(again[0][0]["tool_pose"], label_episode(env, 4, 4)[0][0]["tool_pose"])
     finally:
         env.close()
 
@@ -88,7 +90,8 @@ def test_labels_resume_from_their_files_and_are_remade_for_other_settings(tmp_pa
     assert path.stat().st_mtime_ns == stamp  # reused, not collected again
     for k in first:
         np.testing.assert_array_equal(first[k], again[k])
-    assert list(first["scripted_success"]) == [False, True] and first["labels"][0] == 1
+    # Seed 14 fails and firing at its second candidate rescues it; seed 15 succeeds.
+    assert list(first["scripted_success"]) == [False, True] and list(first["labels"][first["episode"] == 14]) == [0, 1, 0, 0]
     assert len(first["labels"]) == len(first["episode"]) == len(first["tool_pose"])
     fewer = collect_labels(TriggerConfig(out=str(tmp_path), episodes=2, seed=14,
                                          **{**SMALL, "candidates": 2}), progress=False)

@@ -1,0 +1,366 @@
+"""RL Baselines3 Zoo (``rl_zoo3``) and this package: the shipped RL recipes are RL Zoo
+hyperparameter files (``sms3d_env/recipes/<name>.yml``) that ``sms3d train-policy --conf-file``
+reads too (:func:`recipe_fields`), and a model that ``python -m rl_zoo3.train`` saved runs as a
+picker (:func:`zoo_run_of`, used by :class:`~sms3d_env.training.actor.PolicyActor`).
+
+A zoo run folder (``logs/ppo/SMS3DPickTrain-v1_1/``) holds the model (``SMS3DPickTrain-v1.zip``,
+``best_model.zip``, ``rl_model_<N>_steps.zip``) and a folder named after the env with
+``args.yml`` (the command's arguments), ``config.yml`` (the hyperparameters) and, for a
+normalised run, ``vecnormalize.pkl``. The YAML files carry one Python tag (an ``OrderedDict``),
+read as a plain mapping; every other tag is refused. ``vecnormalize.pkl`` is a pickle of SB3's
+``VecNormalize``: it is decoded by a restricted reader (:func:`read_vecnormalize`) that imports
+and calls no class or function named in the file besides numpy's array and dtype constructors;
+every other object becomes an inert record of its state, from which the running means and
+variances are taken. No code from a zoo run's files runs here, but the model zip itself, which
+SB3 loads with cloudpickle: load only models you trust.
+"""
+
+from __future__ import annotations
+
+import io
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sms3d_env.training.model_files import ObservationStats, PolicyFileError, RunningStats
+
+#: The shipped recipes: ``sms3d_env/recipes/<name>.yml``.
+RECIPES_DIR = Path(__file__).parents[1] / "recipes"
+#: The one env wrapper a recipe may name: the flattened observation of ``TrainConfig.flat_observation``.
+FLATTEN_WRAPPER = "gymnasium.wrappers.FlattenObservation"
+#: Callbacks a recipe may name (RL Zoo's ``callback:``), each for a ``TrainConfig`` setting.
+PREGRASP_ANNEALING = "sms3d_env.training.curriculum.pregrasp_annealing"
+FALLING_LEARNING_RATE = "sms3d_env.training.schedules.falling_learning_rate"
+WALL_CLOCK_LIMIT = "sms3d_env.training.rl.wall_clock_limit"
+#: Recipe keys that are ``TrainConfig`` fields of the same name.
+SAME_NAME_KEYS = ("n_envs", "n_steps", "batch_size", "gamma", "learning_rate", "target_kl", "use_sde",
+                  "sde_sample_freq", "buffer_size", "learning_starts")
+#: ``env_kwargs`` entries that are ``TrainConfig`` fields of the same name.
+SAME_NAME_ENV_KWARGS = ("scene_pool", "pregrasp_start", "posture_target", "reach_lateral_weight", "reward_pose",
+                        "success_payoff", "pose_source", "pose_error_deg", "position_noise", "pose_error_range_deg",
+                        "reward_type")
+#: ``env_kwargs`` entries a policy was trained with but need not run with: the training beds, the
+#: start curriculum, the pose source and the reward's shaping (the evaluation chooses its own).
+TRAINING_ONLY_ENV_KWARGS = ("scene_config", "scenes", "scene_pool", "pool_seed", "pregrasp_start", "pose_source",
+                            "pose_error_deg", "position_noise", "pose_error_range_deg", "reach_lateral_weight",
+                            "reward_pose", "success_payoff", "render_mode")
+
+
+class RecipeError(ValueError):
+    """A recipe file that ``sms3d train-policy`` cannot follow; the message names the file and key."""
+
+
+def recipe_path(name_or_path: str | Path) -> Path:
+    """A shipped recipe by name (``"ppo"``: ``sms3d_env/recipes/ppo.yml``) or a recipe file's path
+    (``FileNotFoundError`` naming it when there is neither)."""
+    shipped = RECIPES_DIR / f"{name_or_path}.yml"
+    path = shipped if shipped.is_file() else Path(name_or_path)
+    if not path.is_file():
+        names = sorted(p.stem for p in RECIPES_DIR.glob("*.yml"))
+        raise FileNotFoundError(f"no recipe file {name_or_path} (shipped recipes: {', '.join(names)})")
+    return path
+
+
+#: RL Zoo's one Python tag: its ``yaml.dump`` of an ``OrderedDict`` (``config.yml``, ``args.yml``).
+ORDERED_DICT_TAG = "tag:yaml.org,2002:python/object/apply:collections.OrderedDict"
+
+
+def _safe_zoo_yaml(text: str) -> Any:
+    """YAML as ``yaml.safe_load`` reads it, plus :data:`ORDERED_DICT_TAG` read as a plain mapping
+    (its ``[[key, value], ...]`` argument); any other Python tag stays refused."""
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    def ordered_dict(loader: Any, node: Any) -> dict[str, Any]:
+        (pairs,) = loader.construct_sequence(node, deep=True)
+        return dict(pairs)
+
+    Loader.add_constructor(ORDERED_DICT_TAG, ordered_dict)
+    return yaml.load(text, Loader=Loader)  # noqa: S506  (a SafeLoader with one data-only constructor)
+
+
+def read_zoo_yaml(path: Path) -> dict[str, Any]:
+    """An RL Zoo YAML file (a recipe, ``config.yml``, ``args.yml``) as a mapping; ``RecipeError``
+    naming the file when it is not readable YAML of a mapping."""
+    import yaml
+
+    try:
+        data = _safe_zoo_yaml(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, ValueError) as exc:
+        raise RecipeError(f"{path}: not readable RL Zoo YAML ({exc})") from None
+    if not isinstance(data, dict):
+        raise RecipeError(f"{path}: not a mapping of settings")
+    return data
+
+
+def _callbacks(path: Path, value: Any) -> dict[str, dict[str, Any]]:
+    """A recipe's ``callback:`` (one name, or a list of names or ``{name: kwargs}``) by name."""
+    items = value if isinstance(value, list) else [value]
+    out: dict[str, dict[str, Any]] = {}
+    for item in items:
+        name, kwargs = (next(iter(item.items())) if isinstance(item, dict) and len(item) == 1 else (item, {}))
+        if not isinstance(name, str) or not isinstance(kwargs, dict):
+            raise RecipeError(f"{path}: callback: each entry must be a name or {{name: {{keyword: value}}}}, got {item!r}")
+        out[name] = kwargs
+    return out
+
+
+def recipe_fields(path: Path, env_id: str | None = None) -> tuple[str, dict[str, Any]]:
+    """``(env_id, fields)``: the ``TrainConfig`` fields that the recipe file's entry for ``env_id``
+    (``None``: its only entry) sets. Every key must be one that maps onto a field, read the same
+    way RL Zoo reads it (``n_timesteps`` is ``total_steps``, ``normalize`` a mapping of
+    ``norm_obs``/``norm_reward``, ``env_kwargs.scene_config.placement.num_mushrooms`` is
+    ``num_mushrooms``, the three callbacks of this package are ``pregrasp_anneal``,
+    ``learning_rate_final`` (+ ``learning_rate_by_wall``) and ``max_wall_s``); anything else is a
+    ``RecipeError`` naming the file and the key."""
+    data = read_zoo_yaml(path)
+    if env_id is None:
+        if len(data) != 1:
+            raise RecipeError(f"{path}: holds entries for {sorted(data)}; name one with --env-id")
+        env_id = next(iter(data))
+    if env_id not in data or not isinstance(data[env_id], dict):
+        raise RecipeError(f"{path}: no entry for {env_id} (entries: {sorted(data)})")
+    entry = dict(data[env_id])
+    out: dict[str, Any] = {"env_id": env_id}
+
+    def bad(key: str, why: str) -> RecipeError:
+        return RecipeError(f"{path}: {env_id}.{key}: {why}")
+
+    for key in SAME_NAME_KEYS:
+        if key in entry:
+            value = entry.pop(key)
+            if key == "learning_rate" and not isinstance(value, (int, float)):
+                raise bad(key, f"must be a number, got {value!r} (RL Zoo's lin_ rates fall to 0; a rate that "
+                               f"falls to another value is the callback {FALLING_LEARNING_RATE})")
+            out[key] = value
+    if "n_timesteps" in entry:
+        out["total_steps"] = int(float(entry.pop("n_timesteps")))
+    wrappers = entry.pop("env_wrapper", None)
+    wrappers = [] if wrappers is None else wrappers if isinstance(wrappers, list) else [wrappers]
+    if any(w != FLATTEN_WRAPPER for w in wrappers):
+        raise bad("env_wrapper", f"the one wrapper supported is {FLATTEN_WRAPPER}, got {wrappers}")
+    out["flat_observation"] = bool(wrappers)
+    policy = entry.pop("policy", "MlpPolicy" if wrappers else "MultiInputPolicy")
+    if policy != ("MlpPolicy" if wrappers else "MultiInputPolicy"):
+        raise bad("policy", f"must be MlpPolicy with {FLATTEN_WRAPPER}, MultiInputPolicy without, got {policy!r}")
+    if "normalize" in entry:
+        norm = entry.pop("normalize")
+        if isinstance(norm, bool):
+            norm = {"norm_obs": norm, "norm_reward": norm}
+        if not isinstance(norm, dict) or set(norm) - {"norm_obs", "norm_reward", "gamma"} \
+                or not norm.get("norm_obs", True):
+            raise bad("normalize", f"must be a bool or a mapping of norm_obs (true) and norm_reward, got {norm!r} "
+                                   "(a string would be evaluated as Python)")
+        out["normalize"], out["normalize_reward"] = True, bool(norm.get("norm_reward", True))
+    kwargs = entry.pop("policy_kwargs", {})
+    if not isinstance(kwargs, dict) or set(kwargs) - {"net_arch", "log_std_init"}:
+        raise bad("policy_kwargs", f"must be a mapping of net_arch and log_std_init, got {kwargs!r} "
+                                   "(a string would be evaluated as Python)")
+    if "net_arch" in kwargs:
+        out["net_arch"] = tuple(kwargs["net_arch"])
+    if "log_std_init" in kwargs:
+        out["log_std_init"] = kwargs["log_std_init"]
+    env_kwargs = dict(entry.pop("env_kwargs", None) or {})
+    scene = env_kwargs.pop("scene_config", None)
+    if scene is not None:
+        if not (isinstance(scene, dict) and set(scene) == {"placement"} and isinstance(scene["placement"], dict)
+                and set(scene["placement"]) == {"num_mushrooms"}):
+            raise bad("env_kwargs.scene_config", f"TrainConfig sets placement.num_mushrooms only, got {scene!r}")
+        out["num_mushrooms"] = scene["placement"]["num_mushrooms"]
+    for key in SAME_NAME_ENV_KWARGS:
+        if key in env_kwargs:
+            out[key] = env_kwargs.pop(key)
+    if "pose_error_range_deg" in out:
+        out["pose_error_range_deg"] = tuple(out["pose_error_range_deg"])
+    if env_kwargs:
+        raise bad("env_kwargs", f"no TrainConfig field for {sorted(env_kwargs)}")
+    callbacks = _callbacks(path, entry.pop("callback", []))
+    if PREGRASP_ANNEALING in callbacks:
+        initial = callbacks.pop(PREGRASP_ANNEALING).get("initial")
+        if initial != out.get("pregrasp_start"):
+            raise bad("callback", f"{PREGRASP_ANNEALING} anneals from env_kwargs.pregrasp_start "
+                                  f"({out.get('pregrasp_start')}); its initial must be the same, got {initial!r}")
+        out["pregrasp_anneal"] = True
+    walls = {}
+    if FALLING_LEARNING_RATE in callbacks:
+        rate = callbacks.pop(FALLING_LEARNING_RATE)
+        out["learning_rate_final"] = rate.get("final")
+        if rate.get("max_wall_s") is not None:
+            out["learning_rate_by_wall"], walls["rate"] = True, rate["max_wall_s"]
+    if WALL_CLOCK_LIMIT in callbacks:
+        out["max_wall_s"] = walls["stop"] = callbacks.pop(WALL_CLOCK_LIMIT).get("max_wall_s")
+    if len(set(walls.values())) > 1 or ("rate" in walls and "stop" not in walls):
+        raise bad("callback", f"the falling rate's max_wall_s must be {WALL_CLOCK_LIMIT}'s, got {walls}")
+    if callbacks:
+        raise bad("callback", f"no TrainConfig setting for {sorted(callbacks)} (supported: {PREGRASP_ANNEALING}, "
+                              f"{FALLING_LEARNING_RATE}, {WALL_CLOCK_LIMIT})")
+    if entry:
+        raise bad(", ".join(sorted(entry)), "no TrainConfig field for these keys")
+    return env_id, out
+
+
+def with_recipe(cfg: Any, recipe: str | Path) -> Any:
+    """``cfg`` (a ``TrainConfig``) with the fields that ``recipe`` (a file, or a shipped recipe's
+    name) sets; its entry is ``cfg.env_id``'s when the file has one, else its only one. A field
+    that ``cfg`` sets to neither its default nor the recipe's value is a ``RecipeError`` (a flag
+    given beside the file); the result is validated as any ``TrainConfig``."""
+    from dataclasses import replace
+
+    path = recipe_path(recipe)
+    defaults = type(cfg)()
+    env_ids = read_zoo_yaml(path)
+    env_id, values = recipe_fields(path, cfg.env_id if cfg.env_id in env_ids else None)
+    clash = sorted(k for k, v in values.items() if getattr(cfg, k) not in (getattr(defaults, k), v))
+    if clash:
+        raise RecipeError(f"{path} sets {clash}; leave out the flags that set them too")
+    return replace(cfg, **values)
+
+
+# --------------------------------------------------------------------------- runs rl_zoo3 saved
+
+
+class _Inert:
+    """An object the restricted reader does not build: the global's name, its constructor's
+    arguments and its pickled state, kept as data."""
+
+    global_name = ""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.args, self.kwargs, self.state = args, kwargs, None
+
+    def __setstate__(self, state: Any) -> None:
+        self.state = state
+
+
+def _array_globals() -> dict[tuple[str, str], Any]:
+    """numpy's constructors of arrays, scalars and dtypes: what a pickled array needs, and data only."""
+    from numpy._core import multiarray, numeric
+
+    found = {("numpy", "ndarray"): np.ndarray, ("numpy", "dtype"): np.dtype}
+    for module in ("numpy._core.multiarray", "numpy.core.multiarray"):
+        found[(module, "_reconstruct")] = multiarray._reconstruct
+        found[(module, "scalar")] = multiarray.scalar
+    for module in ("numpy._core.numeric", "numpy.core.numeric"):
+        found[(module, "_frombuffer")] = numeric._frombuffer
+    return found
+
+
+class _RestrictedUnpickler(pickle.Unpickler):
+    ARRAYS = _array_globals()
+
+    def find_class(self, module: str, name: str) -> Any:
+        if (module, name) in self.ARRAYS:
+            return self.ARRAYS[(module, name)]
+        return type(name, (_Inert,), {"global_name": f"{module}.{name}"})
+
+    def persistent_load(self, pid: Any) -> Any:
+        raise pickle.UnpicklingError("persistent ids are not supported")
+
+
+def _running_stats(value: Any, path: Path, what: str) -> RunningStats:
+    state = getattr(value, "state", None)
+    if getattr(value, "global_name", "") != "stable_baselines3.common.running_mean_std.RunningMeanStd" \
+            or not isinstance(state, dict):
+        raise PolicyFileError(path, f"{what} is not SB3's RunningMeanStd")
+    mean, var = np.asarray(state.get("mean"), np.float64), np.asarray(state.get("var"), np.float64)
+    if mean.shape != var.shape or not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var))):
+        raise PolicyFileError(path, f"{what}: mean and variance of different shapes or not finite")
+    return RunningStats(mean, var, float(state.get("count")))
+
+
+def read_vecnormalize(path: str | Path) -> ObservationStats | None:
+    """The observation statistics in SB3's ``vecnormalize.pkl``, decoded by the restricted reader
+    (nothing named in the file is imported or called but numpy's array constructors); ``None``
+    when the wrapper did not normalise observations. ``PolicyFileError`` naming the file when it
+    is not a pickled ``VecNormalize``."""
+    path = Path(path)
+    try:
+        root = _RestrictedUnpickler(io.BytesIO(path.read_bytes())).load()
+    except (OSError, pickle.UnpicklingError, EOFError, ValueError, TypeError, AttributeError, IndexError,
+            KeyError) as exc:
+        raise PolicyFileError(path, f"not readable VecNormalize statistics ({type(exc).__name__}: {exc})") from None
+    state = getattr(root, "state", None)
+    if getattr(root, "global_name", "") != "stable_baselines3.common.vec_env.vec_normalize.VecNormalize" \
+            or not isinstance(state, dict):
+        raise PolicyFileError(path, "not a pickled SB3 VecNormalize")
+    if not state.get("norm_obs", True):
+        return None
+    rms = state.get("obs_rms")
+    obs = ({k: _running_stats(v, path, f"obs_rms[{k!r}]") for k, v in rms.items()} if isinstance(rms, dict)
+           else {None: _running_stats(rms, path, "obs_rms")})
+    returns = _running_stats(state["ret_rms"], path, "ret_rms") if state.get("ret_rms") is not None else None
+    return ObservationStats(obs, float(state.get("clip_obs", 10.0)), float(state.get("epsilon", 1e-8)),
+                            bool(state.get("norm_reward", False)), returns, float(state.get("clip_reward", 10.0)),
+                            float(state.get("gamma", 0.99)))
+
+
+@dataclass(frozen=True)
+class ZooRun:
+    """The files of the rl_zoo3 run a model belongs to: its ``args.yml``/``config.yml`` folder
+    (``params``) and, for a normalised run, ``vecnormalize.pkl`` in it."""
+
+    params: Path
+
+    @property
+    def stats_path(self) -> Path:
+        return self.params / "vecnormalize.pkl"
+
+    def saved_config(self) -> dict[str, Any]:
+        """What a run's ``config.json`` says, from the zoo's files: ``algo``, ``env_id``,
+        ``env_options`` (the env keyword arguments a policy must run with), ``num_mushrooms``,
+        ``normalize``, ``flat_observation`` and ``observation_keys`` (``PolicyFileError`` naming
+        a file that does not say them, or a wrapper other than ``FlattenObservation``)."""
+        args, hyper = (read_zoo_yaml(self.params / name) for name in ("args.yml", "config.yml"))
+        env_id, algo = args.get("env"), args.get("algo")
+        if not isinstance(env_id, str) or not isinstance(algo, str):
+            raise PolicyFileError(self.params / "args.yml", "names no env and algo: not an rl_zoo3 run's")
+        wrappers = hyper.get("env_wrapper") or []
+        wrappers = wrappers if isinstance(wrappers, list) else [wrappers]
+        if any(w != FLATTEN_WRAPPER for w in wrappers):
+            raise PolicyFileError(self.params / "config.yml", f"env_wrapper {wrappers}: the one wrapper a saved "
+                                                             f"policy can run in here is {FLATTEN_WRAPPER}")
+        env_kwargs = dict(args.get("env_kwargs") or hyper.get("env_kwargs") or {})
+        placement = (env_kwargs.get("scene_config") or {}).get("placement") or {}
+        saved: dict[str, Any] = {
+            "recipe": "rl_zoo3", "algo": algo, "env_id": env_id,
+            "env_options": {k: v for k, v in env_kwargs.items() if k not in TRAINING_ONLY_ENV_KWARGS},
+            "normalize": self.stats_path.is_file(), "flat_observation": bool(wrappers)}
+        if isinstance(placement.get("num_mushrooms"), int):
+            saved["num_mushrooms"] = placement["num_mushrooms"]
+        if wrappers:
+            saved["observation_keys"] = _observation_keys(env_id, saved["env_options"])
+        return saved
+
+
+def _observation_keys(env_id: str, env_options: dict[str, Any]) -> list[str]:
+    """The keys of ``env_id``'s dict observation in the order ``FlattenObservation`` concatenates them."""
+    from sms3d_env.training.envs import make_env
+
+    env = make_env(env_id, **env_options)
+    try:
+        return list(env.observation_space.spaces)
+    finally:
+        env.close()
+
+
+def zoo_run_of(model_path: str | Path) -> ZooRun | None:
+    """The rl_zoo3 run of ``model_path`` (its final ``<ENV>.zip``, ``best_model.zip`` or a
+    ``rl_model_<N>_steps.zip`` checkpoint): the folder beside it that holds ``args.yml`` and
+    ``config.yml``, the one named after the model's stem first; ``None`` when there is none.
+    As rl_zoo3's own ``enjoy``, every model of a run uses the run's one ``vecnormalize.pkl``."""
+    path = Path(model_path)
+    named = path.parent / path.stem
+    if (named / "args.yml").is_file():
+        folders = [named]
+    elif path.parent.is_dir():
+        folders = sorted(d for d in path.parent.iterdir() if (d / "args.yml").is_file())
+    else:
+        return None
+    folders = [d for d in folders if (d / "config.yml").is_file()]
+    return ZooRun(folders[0]) if len(folders) == 1 else None
+
