@@ -78,7 +78,9 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     top.grid(alpha=0.3)
     top.legend(fontsize=8, loc="lower left")
     pickers = sorted({picker_name(r.get("picker", "scripted")) for r in rows})
-    top.set_title(f"{', '.join(pickers).capitalize()}: suction pick success vs orientation error")
+    robot, tool, size, _ = axes(rows[0])
+    top.set_title(f"{', '.join(pickers).capitalize()} on the {robot} ({tool}, {size} mushrooms):\n"
+                  "pick success vs orientation error")
     default = [r for r in table if r["variant"] == "default"]
     causes = sorted({c for r in default for c in r["causes"]})
     bottom_acc = np.zeros(len(default))
@@ -155,9 +157,13 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
 
 
 def base_slice(rows: Sequence[dict[str, Any]]) -> RowAxes:
-    """The axes of the 1-D report: the first robot, tool and bed size, the smallest position error."""
+    """The axes of the 1-D report: the first robot (in ``ROBOTS``' order), tool and bed size of the
+    noisy-source rows, the smallest position error; whatever order the rows come in."""
+    from sms3d_env.robot_names import ROBOTS
+
     noisy = [axes(r) for r in rows if r.get("source", "noisy") == "noisy"] or [axes(r) for r in rows]
-    panel = noisy[0].panel
+    panel = min({a.panel for a in noisy},
+                key=lambda p: (ROBOTS.index(p[0]) if p[0] in ROBOTS else len(ROBOTS), p[0], p[1], p[2]))
     return RowAxes(*panel, min(a.position_error_mm for a in noisy if a.panel == panel))
 
 

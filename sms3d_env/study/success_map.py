@@ -120,11 +120,11 @@ def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, panel: str = "", 
         picked = np.array([r["success"] for r in cloud], bool)
         ax.scatter(x[picked], y[picked], s=12, c="k", marker="o", label="perception: picked")
         ax.scatter(x[~picked], y[~picked], s=24, c="m", marker="x", label="perception: missed")
-        ax.set_title(f"{panel + ': ' if panel else ''}success (%, ± 95 % half-width); perception "
+        ax.set_title(f"{panel + chr(10) if panel else ''}Pick success (%, ± 95 % half-width); perception "
                      f"{100 * picked.mean():.0f} % of {len(cloud)}")
         ax.legend(fontsize=7, loc="upper right")
     else:
-        ax.set_title(f"{panel + ': p' if panel else 'P'}ick success (%, ± 95 % half-width) over orientation × "
+        ax.set_title(f"{panel + chr(10) if panel else ''}Pick success (%, ± 95 % half-width) over orientation × "
                      f"cap-top error ({variant})")
     ax.set_xticks(range(len(e)), [f"{v:g}" for v in e])
     ax.set_yticks(range(len(p)), [f"{v:g}" for v in p])

@@ -172,7 +172,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     spec = parse_picker(config.picker)
     tool = {} if task.tool == "suction" else {"tool": task.tool}  # the picker's env may fix it
     env, picker = make_picker_env(
-        spec, scene_config=SceneConfig().replace(placement__num_mushrooms=task.num_mushrooms),
+        spec, scene=SceneConfig().replace(placement__num_mushrooms=task.num_mushrooms),
         pose_source=source, physics=physics, robot=task.robot, **tool, **config.env_kwargs,
     )
     rows = []
@@ -282,6 +282,10 @@ def _check_resumable(path: Path, requested: dict[str, Any]) -> None:
         raise ValueError(f"{path.parent} holds parts but no {path.name}, so their settings are unknown; copy the "
                          f"{path.name} of the sweep that made them beside them, or use another --out")
     stored = _read_json(path, "remove the folder or use another --out")
+    if "env_kwargs" in stored:  # a folder of an earlier version names the env options as that version did
+        from sms3d_env.env_args import translate_legacy_options
+
+        stored["env_kwargs"] = translate_legacy_options(stored["env_kwargs"])
     old_size = stored.get("num_mushrooms")
     if isinstance(old_size, int) and old_size != 25:
         # Before bed sizes were axes, a part's name did not say its size (25 is named by none).
@@ -370,7 +374,7 @@ def _cmd_sweep(args: Any) -> int:
             perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
             perception_realism=args.perception_realism, picker=args.picker, position_errors_mm=tuple(args.position_errors_mm),
             position_along_axis=args.position_along_axis, tools=tuple(args.tool), robots=tuple(args.robot),
-            env_kwargs={} if args.posture_target == "estimate" else {"posture_target": args.posture_target},
+            env_kwargs={} if args.posture_target == "estimate" else {"controller": {"posture_target": args.posture_target}},
         )
     except ConfigError as exc:
         print(f"sms3d sweep: error: argument {SWEEP_FLAGS.get(exc.field, exc.field)}: {exc.message}", file=sys.stderr)
@@ -557,7 +561,7 @@ def register(subparsers: Any) -> None:
                         "(the shipped descend trigger) or residual:PATH/model.zip; every picker sees the same "
                         "seeded episodes")
     p.add_argument("--posture-target", choices=("estimate", "tool"), default="estimate",
-                   help="the env's IK posture (SMS3DPickEnv posture_target): estimate (default) or tool; "
+                   help="the env's IK posture (ControllerConfig.posture_target): estimate (default) or tool; "
                         "a learned picker's own recorded option wins")
     p.add_argument("--chunk", type=int, default=SweepConfig.chunk, help="episodes per resumable task (>= 1)")
     p.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 1)), help="processes")
