@@ -40,7 +40,7 @@ def run(error: float, posture_cost: float, beds: int, episodes: int, seed: int) 
     """``(success, failure cause, stalled)`` per episode whose target is reachable."""
     kw = {"pose_source": "noisy", "pose_error_deg": error} if error > 0 else {}
     env, picker = make_picker_env(PickerSpec("scripted"), controller=ControllerConfig(posture_cost=posture_cost),
-                                  scene_config=generator.SceneConfig().replace(placement__num_mushrooms=beds), **kw)
+                                  scene=generator.SceneConfig().replace(placement__num_mushrooms=beds), **kw)
     rows = []
     try:
         for s in tqdm(range(seed, seed + episodes), desc=f"{error:g} deg, posture {posture_cost:g}", leave=False):

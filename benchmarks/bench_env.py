@@ -23,7 +23,7 @@ import sms3d_env  # noqa: E402, F401
 
 def measure(env_id: str, steps: int, image_obs: bool, n: int) -> tuple[float, float]:
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
-    env = gym.make(env_id, scene_config=cfg, image_obs=image_obs)  # with its time limit
+    env = gym.make(env_id, scene=cfg, image_obs=image_obs)  # with its time limit
     t = time.perf_counter()
     resets = 3
     for s in range(resets):
@@ -61,15 +61,18 @@ def main() -> None:
     print("anchor: FetchPickAndPlace-v4 (state); measure it here with bench_fetch.py")
     print(f"\n{train_id} reset, {args.mushrooms} mushrooms, {args.resets} resets after a warm-up")
     print(f"{'beds':<34}{'reset (s)':>12}")
-    for label, kw in (("new bed per reset", {}), ("scene_pool=8, target_rule=random", {"scene_pool": 8, "target_rule": "random"})):
-        print(f"{label:<34}{reset_time(train_id, args.mushrooms, args.resets, kw):>12.3f}")
+    for label, pool, kw in (("new bed per reset", 0, {}), ("pool of 8, target random", 8, {"target": "random"})):
+        print(f"{label:<34}{reset_time(train_id, args.mushrooms, args.resets, pool, kw):>12.3f}")
 
 
-def reset_time(env_id: str, n: int, resets: int, kwargs: dict) -> float:
-    """Mean reset time once a pool (if any) is warm: each of its beds and targets seen once."""
+def reset_time(env_id: str, n: int, resets: int, pool: int, kwargs: dict) -> float:
+    """Mean reset time once a pool of ``pool`` beds (if any) is warm: each of its beds and targets
+    seen once."""
+    from sms3d_env.scene_source import SceneSourceConfig
+
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
-    env = gym.make(env_id, scene_config=cfg, **kwargs)
-    for s in range(3 * kwargs.get("scene_pool", 1)):
+    env = gym.make(env_id, scene=SceneSourceConfig(config=cfg, pool=pool), **kwargs)
+    for s in range(3 * max(pool, 1)):
         env.reset(seed=s)
     t = time.perf_counter()
     for s in range(resets):

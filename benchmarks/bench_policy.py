@@ -3,7 +3,7 @@ exact McNemar test of each picker against the first one (a paired design: every 
 same scene, target and pose estimate in episode i).
 
 Usage: python benchmarks/bench_policy.py --pickers scripted policy[:PATH] ... [--episodes 100]
-       [--beds 10 25] [--errors 0] [--seed 2000000] [--json OUT.json]
+       [--beds 10 25] [--errors 0] [--seed 2000000] [--robot gantry|jaco] [--json OUT.json]
 
 Seeds 2,000,000 + i are disjoint from the demonstrations (0 ..) and from eval-policy's default
 (1,000,000 + i).
@@ -29,13 +29,15 @@ from sms3d_env.pickers.registry import make_picker_env, parse_picker  # noqa: E4
 from sms3d_env.study.statistics import mcnemar_p, wilson_interval  # noqa: E402
 
 
-def run(picker_text: str, beds: list[int], episodes: int, error: float, seed: int) -> dict:
+def run(picker_text: str, beds: list[int], episodes: int, error: float, seed: int, robot: str | None) -> dict:
     spec = parse_picker(picker_text)
     outcomes, causes, t0 = [], {}, time.perf_counter()
     for n in beds:
-        kw = {"scene_config": generator.SceneConfig().replace(placement__num_mushrooms=n)}
+        kw = {"scene": generator.SceneConfig().replace(placement__num_mushrooms=n)}
         if error > 0:
             kw.update(pose_source="noisy", pose_error_deg=error)
+        if robot is not None:
+            kw["robot"] = robot
         env, picker = make_picker_env(spec, **kw)
         try:
             for i in tqdm(range(episodes), desc=f"{spec.label} {n} mushrooms {error:g} deg", leave=False):
@@ -56,12 +58,15 @@ def main() -> None:
     ap.add_argument("--beds", type=int, nargs="+", default=[10, 25], help="mushrooms per bed")
     ap.add_argument("--errors", type=float, nargs="+", default=[0.0], help="pose errors (deg)")
     ap.add_argument("--seed", type=int, default=2_000_000)
+    ap.add_argument("--robot", choices=["gantry", "jaco"], default=None,
+                    help="the robot every picker acts on (default: the scripted picker's SMS3DPick-v1 gantry, "
+                         "a learned picker's own)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     import torch
 
     torch.set_num_threads(1)  # per-step inference of a small MLP: more threads only add overhead
-    results = [run(p, args.beds, args.episodes, e, args.seed) for e in args.errors for p in args.pickers]
+    results = [run(p, args.beds, args.episodes, e, args.seed, args.robot) for e in args.errors for p in args.pickers]
     print(f"\n{args.episodes} episodes per bed x beds {args.beds}, seeds {args.seed}..; "
           f"p: exact McNemar against {results[0]['picker']} at the same error\n")
     print("| picker | pose error | success | 95 % CI | p vs first | failure causes | wall s |")

@@ -30,7 +30,7 @@ def run_cell(robot: str, error_deg: float, episodes: int) -> dict:
     from sms3d_env.pickers.episode import run_episode
     from sms3d_env.pickers.scripted import ScriptedPicker
 
-    env = gym.make("SMS3DPick-v1", robot=robot, scene_config=SceneConfig().replace(placement__num_mushrooms=25),
+    env = gym.make("SMS3DPick-v1", robot=robot, scene=SceneConfig().replace(placement__num_mushrooms=25),
                    pose_source="noisy" if error_deg else "oracle", pose_error_deg=error_deg)
     picker = ScriptedPicker.for_env(env)
     causes, times = collections.Counter(), []

@@ -2,8 +2,8 @@
 given the *true* pose in some of its phases (what a picker that inferred the truth perfectly
 could do), and with a stall escape (what getting out of the approach's IK stalls is worth).
 
-Rows, each on the same seeded episodes (25-mushroom beds, ``posture_target="tool"``, the env the
-learned pickers are compared in):
+Rows, each on the same seeded episodes (25-mushroom beds, ``ControllerConfig(posture_target="tool")``,
+the env the learned pickers are compared in):
 - ``scripted``: the study's picker on the estimate (the reference of the McNemar tests);
 - ``truth: approach``: the true pose while approaching, the estimate from the descent on;
 - ``truth: descend + twist``: the estimate while approaching, the truth from the descent on
@@ -89,8 +89,8 @@ def run(error: float, truth_phases: frozenset[str], escape: bool, beds: int, epi
         seed: int) -> list[tuple[int, bool, str]]:
     """``(seed, success, failure cause)`` per episode whose target is reachable."""
     kw = {"pose_source": "noisy", "pose_error_deg": error} if error > 0 else {}
-    env, picker = make_picker_env(PickerSpec("scripted"), posture_target="tool",
-                                  scene_config=generator.SceneConfig().replace(placement__num_mushrooms=beds), **kw)
+    env, picker = make_picker_env(PickerSpec("scripted"), controller={"posture_target": "tool"},
+                                  scene=generator.SceneConfig().replace(placement__num_mushrooms=beds), **kw)
     if escape:
         u = env.unwrapped
         picker = StallEscapingPicker(u.ctrl_cfg.max_linear_speed, u.ctrl_cfg.max_angular_speed, u.control_dt)

@@ -17,6 +17,8 @@ from gymnasium.envs.registration import register, registry  # noqa: E402
 #: ``sms3d_env.pick_env`` through the entry point.
 _EXPORTS = {
     "ControllerConfig": "controller", "IKController": "controller",
+    "SceneSourceConfig": "scene_source", "TargetRule": "targets", "RewardConfig": "rewards",
+    "PregraspStart": "start_states", "ImageObservation": "cameras", "RenderCamera": "cameras",
     "PickPhysicsParams": "physics_params",
     "FAILURE_CAUSES": "picking_model", "SMS3DPickEnv": "pick_env",
     "EpisodeState": "episode_state", "PickingModel": "picking_model",
@@ -36,17 +38,17 @@ TRAIN_OPTIONS = {"reward_type": "staged", "suction_mode": "latched", "end_on_dea
                  "task_obs": True}
 
 #: What SMS3DPick-v1 changes from v0 (see ``SMS3DPickEnv``'s version history): an honest robot,
-#: every mushroom colliding.
-V1_OPTIONS = {"robot": "gantry", "free_radius": None}
+#: every mushroom colliding (the env's defaults; v0's entry point ``make_v0_env`` frees only the
+#: mushrooms near the target).
+V1_OPTIONS = {"robot": "gantry"}
 
-for _id, _kw in (("SMS3DPick-v0", {"reward_type": "dense"}),
-                 ("SMS3DPickSparse-v0", {"reward_type": "sparse"}),
-                 ("SMS3DPickTrain-v0", TRAIN_OPTIONS),
-                 ("SMS3DPick-v1", {"reward_type": "dense", **V1_OPTIONS}),
-                 ("SMS3DPickTrain-v1", {**TRAIN_OPTIONS, **V1_OPTIONS})):
+for _id, _entry, _kw in (("SMS3DPick-v0", "make_v0_env", {"reward_type": "dense"}),
+                         ("SMS3DPickSparse-v0", "make_v0_env", {"reward_type": "sparse"}),
+                         ("SMS3DPickTrain-v0", "make_v0_env", TRAIN_OPTIONS),
+                         ("SMS3DPick-v1", "SMS3DPickEnv", {"reward_type": "dense", **V1_OPTIONS}),
+                         ("SMS3DPickTrain-v1", "SMS3DPickEnv", {**TRAIN_OPTIONS, **V1_OPTIONS})):
     if _id not in registry:
-        register(id=_id, entry_point="sms3d_env.pick_env:SMS3DPickEnv", max_episode_steps=250,
-                 kwargs=_kw)
+        register(id=_id, entry_point=f"sms3d_env.pick_env:{_entry}", max_episode_steps=250, kwargs=_kw)
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -16,14 +16,27 @@ import mink
 import mujoco
 import numpy as np
 
+from sms3d_env.records import check_choice, check_int, check_number
 from sms3d_env.robot import TOOL_SITE, RobotSpec, arm_only_model
+
+#: The IK's null-space posture rules (``ControllerConfig.posture_target``; :mod:`sms3d_env.posture`).
+POSTURE_TARGETS = ("estimate", "tool")
 
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """Speeds and IK weights.
+    """Control period, speeds and IK weights (the env's ``controller`` argument, or its mapping
+    form, e.g. ``{"posture_target": "tool"}``).
 
     Attributes:
+        control_dt: the control period (s): one action per period.
+        substeps: physics steps per control period (the physics step is ``control_dt /
+            substeps``).
+        posture_target: the IK's null-space posture (:mod:`sms3d_env.posture`): ``"estimate"``
+            (default) a pre-grasp configuration solved once per episode for the *estimated*
+            axis; ``"tool"`` solved again whenever the tool axis turns more than 5 deg away from
+            the axis of the last solve, so a picker that corrects a wrong estimate is not pulled
+            back towards it.
         max_linear_speed: tool speed at |action| = 1 (m/s). ASSUMPTION: a safe speed near produce.
         max_angular_speed: tool angular speed at |action| = 1 (rad/s). ASSUMPTION.
         max_joint_speed: per-joint velocity limit of revolute joints in the IK (rad/s); Jaco's
@@ -38,6 +51,9 @@ class ControllerConfig:
         damping: Levenberg-Marquardt damping of the IK QP.
     """
 
+    control_dt: float = 0.04
+    substeps: int = 20
+    posture_target: str = "estimate"
     max_linear_speed: float = 0.12
     max_angular_speed: float = 0.8
     max_joint_speed: float = 1.0
@@ -50,11 +66,11 @@ class ControllerConfig:
     damping: float = 1e-4
 
     def __post_init__(self) -> None:
-        for name in ("max_linear_speed", "max_angular_speed", "max_joint_speed", "max_slide_speed",
+        for name in ("control_dt", "max_linear_speed", "max_angular_speed", "max_joint_speed", "max_slide_speed",
                      "max_lead", "max_slide_lead"):
-            v = getattr(self, name)
-            if not np.isfinite(v) or v <= 0:
-                raise ValueError(f"ControllerConfig.{name} must be > 0, got {v!r}")
+            check_number(f"ControllerConfig.{name}", getattr(self, name), 1e-9, math.inf, "a finite number > 0")
+        check_int("ControllerConfig.substeps", self.substeps, 1)
+        check_choice("ControllerConfig.posture_target", self.posture_target, POSTURE_TARGETS)
 
 
 class ArmBoxLimit(mink.Limit):
@@ -87,8 +103,8 @@ class ArmBoxLimit(mink.Limit):
 class IKController:
     """Turns world-frame tool twists into commanded arm joint angles with mink."""
 
-    def __init__(self, robot: RobotSpec, cfg: ControllerConfig, dt: float) -> None:
-        self.cfg, self.dt = cfg, dt
+    def __init__(self, robot: RobotSpec, cfg: ControllerConfig) -> None:
+        self.cfg, self.dt = cfg, cfg.control_dt
         self.model = arm_only_model(robot)
         self.configuration = mink.Configuration(self.model)
         self.site = robot.prefix + TOOL_SITE

@@ -123,7 +123,7 @@ def run_demo(out: str | Path = "sms3d_demo", seed: int = 0, episodes: int = 5) -
         print('no videos: they need imageio-ffmpeg (pip install "sms3d-pick[video]")')
     rates = {}
     for label, source, name in PICKS:
-        env = gym.make("SMS3DPick-v1", scene_config=config, render_mode="rgb_array", render_size=(240, 320),
+        env = gym.make("SMS3DPick-v1", scene=config, render_mode="rgb_array", render_camera={"size": (240, 320)},
                        **source)
         picker = ScriptedPicker.for_env(env)
         video = out / Path(name).with_suffix(".mp4") if videos else None

@@ -1,136 +1,130 @@
-"""Argument checks of ``SMS3DPickEnv``: refuse what the env could not honour or would silently
-ignore, with a ``ValueError``/``TypeError`` naming the argument."""
+"""``SMS3DPickEnv``'s keyword arguments: the checks of those that are no record (refusing what the
+env could not honour or would silently ignore, with a ``ValueError``/``TypeError`` naming the
+argument), and ``translate_legacy_options``, which reads the arguments of earlier versions.
+
+Light on purpose (numpy only at import): training code reads saved env options with it without
+loading MuJoCo.
+"""
 
 from __future__ import annotations
 
 import math
+import warnings
+from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
-
-from sms3d_env.rewards import REWARD_TYPES
-from sms3d_env.robot import TOOLS
-from sms3d_env.targets import RULES
+from sms3d_env.records import check_choice, check_flag, check_number
 
 SUCTION_MODES = ("momentary", "latched")
-POSTURE_TARGETS = ("estimate", "tool")
-REWARD_POSES = ("estimate", "truth")
-SUCCESS_PAYOFFS = ("time_left", "fixed")
 RENDER_MODES = ("rgb_array", "depth_array", "human")
 
 
-def _int_at_least(name: str, v: Any, least: int = 0) -> None:
-    """ValueError unless ``v`` is an integer (not a bool) >= ``least``."""
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < least:
-        raise ValueError(f"{name} must be an integer >= {least}, got {v!r}")
+def pose_error_of(pose_error_deg: Any) -> float | tuple[float, float]:
+    """The ``"noisy"`` source's rotation error: a number of degrees in [0, 180], or a ``(low,
+    high)`` pair with 0 <= low <= high <= 180, drawn uniformly per episode (``ValueError`` naming
+    ``pose_error_deg`` otherwise)."""
+    if isinstance(pose_error_deg, (tuple, list)):
+        ok = len(pose_error_deg) == 2 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in pose_error_deg)
+        if not (ok and 0 <= pose_error_deg[0] <= pose_error_deg[1] <= 180):
+            raise ValueError(f"pose_error_deg as (low, high) must be degrees with 0 <= low <= high <= 180, "
+                             f"got {pose_error_deg!r}")
+        return float(pose_error_deg[0]), float(pose_error_deg[1])
+    check_number("pose_error_deg", pose_error_deg, 0.0, 180.0,
+                 "a number of degrees in [0, 180] or a (low, high) pair")
+    return float(pose_error_deg)
 
 
-def _finite(name: str, v: Any, lo: float, hi: float, what: str) -> None:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and lo <= v <= hi):
-        raise ValueError(f"{name} must be {what}, got {v!r}")
+def check_env_args(*, render_mode: Any, tool: Any, suction_mode: Any, pose_source: Any, pose_error_deg: Any,
+                   end_on_dead_end: Any, task_obs: Any) -> None:
+    """The checks of the env's arguments that are no record (``tool`` is the resolved tool:
+    ``robot.tool`` or the ``tool`` argument)."""
+    from sms3d_env.robot import TOOLS
 
-
-def _flag(name: str, v: Any) -> None:
-    """TypeError unless ``v`` is a bool (numpy's too): by truthiness, ``"no"`` or ``"false"``
-    would switch the option on."""
-    if not isinstance(v, (bool, np.bool_)):
-        raise TypeError(f"{name} must be True or False, got {type(v).__name__} {v!r}")
-
-
-def check_pregrasp_start(share: Any) -> None:
-    _finite("pregrasp_start", share, 0.0, 1.0, "a probability in [0, 1]")
-
-
-def check_env_args(*, render_mode: Any, reward_type: Any, control_dt: Any, substeps: Any, tool: Any,
-                   suction_mode: Any, horizon: Any, scene_pool: Any, pool_seed: Any, scenes: Any,
-                   pose_source: Any, pose_error_deg: Any, position_noise: Any, target_rule: Any,
-                   pose_error_range_deg: Any = None,
-                   image_size: Any, render_size: Any, max_tilt_deg: Any, free_radius: Any,
-                   scene_config: Any, posture_target: Any = "estimate", pregrasp_start: Any = 0.0,
-                   reach_lateral_weight: Any = 1.0, reward_pose: Any = "estimate",
-                   success_payoff: Any = "time_left", image_obs: Any = False, end_on_dead_end: Any = False,
-                   task_obs: Any = False) -> None:
-    """Every check of the env's keyword arguments that needs no model (``tool`` is the resolved
-    tool, ``robot.tool`` or the ``tool`` argument)."""
-    for name, v in (("image_obs", image_obs), ("end_on_dead_end", end_on_dead_end), ("task_obs", task_obs)):
-        _flag(name, v)
-    if render_mode is not None and render_mode not in RENDER_MODES:
-        raise ValueError(f"render_mode must be one of {RENDER_MODES}, got {render_mode!r}")
-    if reward_type not in REWARD_TYPES:
-        raise ValueError(f"reward_type must be one of {REWARD_TYPES}, got {reward_type!r}")
-    _finite("control_dt", control_dt, 1e-6, math.inf, "a finite number > 0 (s)")
-    _int_at_least("substeps", substeps, 1)
-    if tool not in TOOLS:
-        raise ValueError(f"tool must be one of {TOOLS}, got {tool!r}")
-    if suction_mode not in SUCTION_MODES:
-        raise ValueError(f"suction_mode must be one of {SUCTION_MODES}, got {suction_mode!r}")
+    for name, v in (("end_on_dead_end", end_on_dead_end), ("task_obs", task_obs)):
+        check_flag(name, v)
+    if render_mode is not None:
+        check_choice("render_mode", render_mode, RENDER_MODES)
+    check_choice("tool", tool, TOOLS)
+    check_choice("suction_mode", suction_mode, SUCTION_MODES)
     if tool != "suction" and suction_mode != "momentary":
         raise ValueError(f"suction_mode={suction_mode!r} applies to the suction tool only (tool={tool!r})")
-    if posture_target not in POSTURE_TARGETS:
-        raise ValueError(f"posture_target must be one of {POSTURE_TARGETS}, got {posture_target!r}")
-    check_pregrasp_start(pregrasp_start)
-    _finite("reach_lateral_weight", reach_lateral_weight, 1.0, math.inf, "a finite number >= 1")
-    if reach_lateral_weight != 1 and reward_type != "staged":
-        raise ValueError(f"reach_lateral_weight shapes the staged reward only; with reward_type="
-                         f"{reward_type!r} it would be ignored (got {reach_lateral_weight!r})")
-    if reward_pose not in REWARD_POSES:
-        raise ValueError(f"reward_pose must be one of {REWARD_POSES}, got {reward_pose!r}")
-    if reward_pose != "estimate" and reward_type == "sparse":
-        raise ValueError("reward_pose shapes the dense and staged rewards; the sparse reward has no "
-                         "approach term it could change")
-    if success_payoff not in SUCCESS_PAYOFFS:
-        raise ValueError(f"success_payoff must be one of {SUCCESS_PAYOFFS}, got {success_payoff!r}")
-    if success_payoff != "time_left" and reward_type != "staged":
-        raise ValueError(f"success_payoff sets the staged reward's success bonus; with reward_type="
-                         f"{reward_type!r} it would be ignored (got {success_payoff!r})")
-    _int_at_least("horizon", horizon, 1)
-    _int_at_least("scene_pool", scene_pool)
-    _int_at_least("pool_seed", pool_seed)
-    if scenes is not None and not isinstance(scenes, (str, bytes)) and hasattr(scenes, "__len__") and len(scenes) == 0:
-        raise ValueError("scenes must be a non-empty sequence")
-    if scene_pool and scenes is not None:
-        raise ValueError("scene_pool draws generated beds; with scenes given it would be ignored")
-    for name, v in (("pose_error_deg", pose_error_deg), ("position_noise", position_noise)):
-        _finite(name, v, 0.0, math.inf, "a finite number >= 0")
-    if pose_source != "noisy" and (pose_error_deg or position_noise):
-        raise ValueError(f"pose_error_deg and position_noise apply to pose_source='noisy' only; with "
-                         f"pose_source={pose_source!r} they would be ignored (got pose_error_deg="
-                         f"{pose_error_deg!r}, position_noise={position_noise!r})")
-    if pose_error_range_deg is not None:
-        ok = (isinstance(pose_error_range_deg, (tuple, list)) and len(pose_error_range_deg) == 2
-              and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose_error_range_deg)
-              and 0 <= pose_error_range_deg[0] <= pose_error_range_deg[1] <= 180)
-        if not ok:
-            raise ValueError(f"pose_error_range_deg must be (low, high) degrees with 0 <= low <= high <= 180, "
-                             f"got {pose_error_range_deg!r}")
-        if pose_source != "noisy" or pose_error_deg or position_noise:
-            raise ValueError(f"pose_error_range_deg draws the 'noisy' source's error per episode: it needs "
-                             f"pose_source='noisy' without pose_error_deg or position_noise (got pose_source="
-                             f"{pose_source!r}, pose_error_deg={pose_error_deg!r}, position_noise={position_noise!r})")
-    if target_rule not in RULES:
-        raise ValueError(f"target_rule must be one of {RULES}, got {target_rule!r}")
-    for name, size in (("image_size", image_size), ("render_size", render_size)):
-        ok = (isinstance(size, (tuple, list)) and len(size) == 2
-              and all(isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1 for n in size))
-        if not ok:
-            raise ValueError(f"{name} must be two integers >= 1 (height, width), got {size!r}")
-    _finite("max_tilt_deg", max_tilt_deg, 0.0, 90.0, "a finite number in [0, 90]")
-    if free_radius is not None:
-        _finite("free_radius", free_radius, 1e-9, math.inf, "None or a finite number > 0 (m)")
-    scene_config_of(scene_config)
+    error = pose_error_of(pose_error_deg)
+    if pose_source != "noisy" and error:
+        raise ValueError(f"pose_error_deg applies to pose_source='noisy' only; with pose_source={pose_source!r} it "
+                         f"would be ignored (got pose_error_deg={pose_error_deg!r}; a NoisyPose object carries its "
+                         "own error)")
 
 
-def scene_config_of(scene_config: Any) -> Any:
-    """The env's ``scene_config`` as a ``generator.SceneConfig`` (``None`` stays ``None``): its
-    mapping form (the JSON an env spec holds) is read with ``SceneConfig.from_dict``, whose
-    ``ConfigError`` names a bad field; anything else is a ``TypeError``."""
-    from collections.abc import Mapping
+#: Env options removed because they measured worse (CHANGELOG), and the value each had by default.
+REMOVED_OPTIONS = {"reach_lateral_weight": 1.0, "reward_pose": "estimate", "success_payoff": "time_left"}
+#: Earlier keyword arguments -> (the argument that holds them now, the field of its mapping form).
+_MOVED = {
+    "scene_config": ("scene", "config"), "scenes": ("scene", "scenes"), "scene_pool": ("scene", "pool"),
+    "pool_seed": ("scene", "pool_seed"), "free_radius": ("scene", "free_radius"),
+    "target_rule": ("target", "rule"), "target_index": ("target", "index"), "max_tilt_deg": ("target", "max_tilt_deg"),
+    "control_dt": ("controller", "control_dt"), "substeps": ("controller", "substeps"),
+    "posture_target": ("controller", "posture_target"), "pregrasp_start": ("start", "share"),
+}
 
-    from generator.config import SceneConfig
 
-    if scene_config is None or isinstance(scene_config, SceneConfig):
-        return scene_config
-    if isinstance(scene_config, Mapping):
-        return SceneConfig.from_dict(scene_config)
-    raise TypeError(f"scene_config must be a generator.SceneConfig, its mapping form or None, got "
-                    f"{type(scene_config).__name__} {scene_config!r}")
+def translate_legacy_options(options: Mapping[str, Any]) -> dict[str, Any]:
+    """``SMS3DPickEnv`` keyword arguments of earlier versions (a saved run's ``config.json``
+    ``env_options``, an RL Zoo recipe's ``env_kwargs``, a Minari dataset's env spec) in the
+    constructor's current form; current arguments pass unchanged.
+
+    | earlier | now |
+    | --- | --- |
+    | ``scene_config``, ``scenes``, ``scene_pool``, ``pool_seed``, ``free_radius`` | ``scene``: ``SceneSourceConfig``'s mapping form (``config``, ``scenes``, ``pool``, ``pool_seed``, ``free_radius``) |
+    | ``target_rule``, ``target_index``, ``max_tilt_deg`` | ``target``: ``{"rule", "index", "max_tilt_deg"}`` |
+    | ``pose_error_range_deg`` | ``pose_error_deg``: ``(low, high)`` |
+    | ``position_noise`` | ``pose_source``: ``NoisyPose(pose_error_deg, position_std=position_noise)`` |
+    | ``control_dt``, ``substeps``, ``posture_target`` | ``controller``: ``{"control_dt", "substeps", "posture_target"}`` |
+    | ``horizon`` | ``reward_type``: ``{"kind": reward_type, "horizon": horizon}`` |
+    | ``pregrasp_start`` | ``start``: ``{"share": pregrasp_start}`` |
+    | ``image_size``, ``camera`` | ``image_obs``: ``{"size", "camera"}`` (with ``image_obs=True``) |
+    | ``camera``, ``render_size`` | ``render_camera``: ``{"name", "size"}`` |
+    | ``reach_lateral_weight``, ``reward_pose``, ``success_payoff`` | removed (they shaped training rewards only, so a saved policy runs the same without them); a value other than the default is dropped with a warning |
+
+    What the earlier env ignored is dropped (``scene_config`` beside ``scenes``, ``target_index``
+    with another rule, ``image_size`` without image observations). ``ValueError`` naming both when an
+    earlier key and the argument that holds it now are given together, or for a ``horizon``
+    other than 250 without the ``reward_type`` it belongs to.
+    """
+    out = dict(options)
+    old = {k: out.pop(k) for k in list(out) if k in _MOVED}
+    for name in REMOVED_OPTIONS:
+        if name in out and out.pop(name) != REMOVED_OPTIONS[name]:
+            warnings.warn(f"the env option {name}={options[name]!r} was removed (it measured worse; see the "
+                          f"CHANGELOG); the env is built without it", stacklevel=2)
+    if "scenes" in old and old["scenes"] is not None:
+        old.pop("scene_config", None)  # ignored beside scenes
+    if old.get("target_rule", "tallest") != "index":
+        old.pop("target_index", None)  # read by the index rule only
+    for key, value in old.items():
+        argument, field = _MOVED[key]
+        if argument in options:
+            raise ValueError(f"env options give both {key} (an earlier argument) and {argument}, which holds it now "
+                             f"as {argument}.{field}; give {argument} alone")
+        out.setdefault(argument, {})[field] = value
+    range_deg = out.pop("pose_error_range_deg", None)
+    if range_deg is not None:
+        out["pose_error_deg"] = [float(v) for v in range_deg]
+    noise = out.pop("position_noise", 0.0)
+    if noise:
+        from sms3d_env.pose_sources import NoisyPose
+
+        out["pose_source"] = NoisyPose(float(out.pop("pose_error_deg", 0.0)), position_std=float(noise))
+    horizon = out.pop("horizon", 250)
+    if horizon != 250:
+        if not isinstance(out.get("reward_type"), str):
+            raise ValueError(f"env option horizon={horizon!r} sets the staged reward's horizon: give it with "
+                             "reward_type={'kind': ..., 'horizon': ...} (the earlier options name no reward_type)")
+        out["reward_type"] = {"kind": out["reward_type"], "horizon": horizon}
+    camera, image_size = out.pop("camera", None), out.pop("image_size", None)
+    if out.get("image_obs") is True and (camera is not None or image_size is not None):
+        out["image_obs"] = {"size": image_size or (64, 64), "camera": camera or "overhead"}
+    render_size = out.pop("render_size", None)
+    if camera is not None or render_size is not None:
+        out["render_camera"] = {"name": camera, **({"size": render_size} if render_size is not None else {})}
+    return out

@@ -48,11 +48,11 @@ def outcome_text(info: dict[str, Any]) -> str:
 
 def target_ring(env: Any, height: int, width: int) -> tuple[tuple[int, int], int] | None:
     """Pixel centre ``(u, v)`` and radius (px) of the target's cap in an ``height`` × ``width``
-    render of ``env.render_camera`` (the cap's radius at its top's depth, plus a margin); None
+    render of ``env.render_camera.name`` (the cap's radius at its top's depth, plus a margin); None
     when the cap top is behind the camera."""
     world, target = env.world, env.picking.state.target
     m, d = world.model, world.data
-    cam = m.camera(env.render_camera).id
+    cam = m.camera(env.render_camera.name).id
     focal = 0.5 * height / np.tan(np.radians(m.cam_fovy[cam]) / 2)
     intrinsics = Intrinsics(width, height, focal, focal, width / 2 - 0.5, height / 2 - 0.5)
     pose = world_from_camera_cv(d.cam_xpos[cam], d.cam_xmat[cam].reshape(3, 3))

@@ -2,8 +2,11 @@
 a Kinova Jaco, by a suction tool (default) or the Jaco 3-finger hand.
 
 The env holds the gym API only: spaces, reset/step, observation, reward assembly and rendering.
-The beds come from :mod:`sms3d_env.scene_source`; the world (scene + robot model and its id
-tables) is :mod:`sms3d_env.world`; the picking rules (roots, bruising, neighbours, success and
+Its options are records checked where they are defined (:mod:`sms3d_env.env_args` checks the
+rest and reads the options of earlier versions). The beds come from :mod:`sms3d_env.scene_source`;
+the arm's start from :mod:`sms3d_env.start_states`; the IK's posture target from
+:mod:`sms3d_env.posture`; the world (scene + robot model and its id tables) is
+:mod:`sms3d_env.world`; the picking rules (roots, bruising, neighbours, success and
 failure) are :mod:`sms3d_env.picking_model`, called after every physics substep, with each tool's
 own (suction: valve, seal, grip; hand: fingers) in :mod:`sms3d_env.tools`; the reward terms are
 :mod:`sms3d_env.rewards`.
@@ -13,7 +16,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
@@ -23,33 +26,30 @@ import numpy as np
 from gymnasium import spaces
 
 from generator.gl import open_renderer
+from sms3d_env.cameras import ImageObservation, RenderCamera
 from sms3d_env.controller import ControllerConfig, IKController
-from sms3d_env.env_args import (
-    POSTURE_TARGETS,
-    RENDER_MODES,
-    SUCTION_MODES,
-    check_env_args,
-    check_pregrasp_start,
-    scene_config_of,
-)
+from sms3d_env.env_args import RENDER_MODES, SUCTION_MODES, check_env_args, pose_error_of
 from sms3d_env.physics_params import PickPhysicsParams
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
-from sms3d_env.pose_sources import OraclePose, PoseSource, make_pose_source
-from sms3d_env.rewards import RewardState, compute_reward, reward_terms
+from sms3d_env.pose_sources import PoseSource, make_pose_source
+from sms3d_env.posture import IKPosture
+from sms3d_env.records import record_of
+from sms3d_env.rewards import RewardConfig, RewardState, compute_reward, reward_terms
 from sms3d_env.robot import RobotConfig, RobotSpec
 from sms3d_env.robots import make_robot
-from sms3d_env.scene_source import SceneSource
-from sms3d_env.targets import Reachability, select_target
+from sms3d_env.scene_source import SceneSource, scene_source_config
+from sms3d_env.start_states import PregraspStart, check_share
+from sms3d_env.targets import Reachability, TargetRule, select_target
 from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
 from sms3d_env.viewer import PassiveViewer
-from sms3d_env.world import CAMERAS, PICK_CAMERA, PICK_CAMERA_DISTANCE, World, build_world
+from sms3d_env.world import PICK_CAMERA, PICK_CAMERA_DISTANCE, World, build_world
 
-__all__ = ["FAILURE_CAUSES", "POSTURE_TARGETS", "SUCTION_MODES", "SMS3DPickEnv"]
+__all__ = ["FAILURE_CAUSES", "SUCTION_MODES", "V0_FREE_RADIUS", "SMS3DPickEnv", "make_v0_env"]
 
 _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
-# posture_target="tool": the posture target is solved again once the tool axis has turned this
-# far from the axis it was solved for (an IK solve costs milliseconds; most steps need none).
-_POSTURE_RESOLVE_DEG = 5.0
+#: ``SMS3DPick-v0``'s collision set: only the mushrooms within this distance (m) of the target
+#: can move (``SceneSourceConfig.free_radius``).
+V0_FREE_RADIUS = 0.10
 # State observation entries and their sizes, in the order of the flat vector they are cut from.
 _OBS_SIZES = {"joint_pos": 6, "joint_vel": 6, "tool_pose": 7, "suction": 3, "target_pose": 6,
               "target_rel": 3}
@@ -72,7 +72,8 @@ class SMS3DPickEnv(gym.Env):
     | 3–5 | tool angular velocity (world) | × ``max_angular_speed`` (rad/s) |
     | 6 | suction on if > 0 (``suction_mode="latched"``: held once sealed); hand: fingers' target, −1 open … +1 closed | |
 
-    mink's differential IK turns the twist into joint targets every ``control_dt``. NaN/inf raise.
+    mink's differential IK turns the twist into joint targets every ``ControllerConfig.control_dt``.
+    NaN/inf raise.
 
     ## Observation space
     A ``Dict`` (SB3's ``MultiInputPolicy``); all float64 unless noted:
@@ -85,7 +86,7 @@ class SMS3DPickEnv(gym.Env):
     | ``target_pose`` | 6 | the *estimated* cap top (m) and stem axis (from the pose source) |
     | ``target_rel`` | 3 | estimated cap top − tool position (m) |
     | ``tool_in_target``, ``progress``, ``wrist_wrench`` | 7, 3, 6 | with ``task_obs=True``: see :mod:`sms3d_env.task_obs` |
-    | ``rgb``, ``depth`` | H × W × 3 uint8, H × W × 1 float32 | with ``image_obs=True`` (``camera``, by default ``"overhead"``) |
+    | ``rgb``, ``depth`` | H × W × 3 uint8, H × W × 1 float32 | with ``image_obs`` (``ImageObservation``: size, by default the ``"overhead"`` camera) |
 
     Nothing in the observation is privileged: no true pose, no root or seal loads beyond what a
     vacuum sensor reports.
@@ -93,9 +94,8 @@ class SMS3DPickEnv(gym.Env):
     ## Reward
     ``"dense"`` (default), ``"sparse"`` (0 on success, −1 otherwise) or ``"staged"`` (bounded per
     step, maximal at success; terms in ``info["reward_stage"|"reward_progress"|"reward_success_bonus"]``),
-    see :mod:`sms3d_env.rewards`. Their approach terms pull towards the estimated pose
-    (``reward_pose="truth"``: towards the true one); the staged success bonus is the steps left
-    (``success_payoff="fixed"``: the horizon, whenever the success comes).
+    see :mod:`sms3d_env.rewards`. Their approach terms pull towards the estimated pose; the staged
+    success bonus is the steps left until ``RewardConfig.horizon``.
 
     ## Episode end
     | | when |
@@ -107,111 +107,54 @@ class SMS3DPickEnv(gym.Env):
     ``info``: ``is_success``, ``failure_cause`` (one of ``FAILURE_CAUSES``), ``target``,
     ``reachable``, ``gripped``, ``gripped_target``, ``target_detached``, ``bruised``,
     ``neighbours_disturbed``, ``lift``, ``unstable_simulation`` (the picking model's
-    ``evaluate()``), ``start`` (``"home"``, or ``"pregrasp"`` for a ``pregrasp_start`` reset),
+    ``evaluate()``), ``start`` (``"home"``, or ``"pregrasp"`` for a ``PregraspStart`` reset),
     ``time_s`` (simulated seconds since reset; at success, the pick's cycle time), plus the
     staged reward's terms. ``failure_cause="not_reached"``: the tool never came within 1 cm of
     the target's true cap top (the approach stopped short); ``"no_seal"``: it did, and no seal
     formed.
 
+    ## Arguments
+    Each record argument also takes its mapping form (field name -> value, e.g.
+    ``controller={"posture_target": "tool"}``), so that an env spec stays JSON: Minari datasets,
+    RL Zoo recipes and a saved policy's ``config.json`` rebuild the env from it. Options of earlier
+    versions are read by :func:`sms3d_env.env_args.translate_legacy_options`.
+
+    | Parameter | Type | Default | Description |
+    | --- | --- | --- | --- |
+    | ``render_mode`` | ``str`` or None | None | ``"rgb_array"``, ``"depth_array"`` (metric depth in metres) or ``"human"`` (MuJoCo's passive viewer, synced at every reset and step, closed by ``close()``; it needs a display, see :mod:`sms3d_env.viewer`, else ``DisplayUnavailableError``) |
+    | ``robot`` | ``str``, ``GantryConfig``, ``RobotConfig`` or None | None | ``"gantry"`` (``SMS3DPick-v1``'s: the Cartesian harvester of :mod:`sms3d_env.gantry`) or ``"jaco"`` (the Kinova Jaco hanging above the bed), or a robot config; every link of either collides with the soil and the mushrooms. None: ``SMS3DPick-v0``'s Jaco, mounted beside the bed with five links that collide with nothing |
+    | ``tool`` | ``str`` or None | None | ``"suction"`` or ``"hand"``; overrides the robot's tool (default: ``"suction"``) |
+    | ``scene`` | ``SceneSourceConfig``, ``generator.SceneConfig``, a list of ``generator.Scene``, a dataset folder, or None | None | where each reset's bed comes from and which mushrooms can move (:class:`~sms3d_env.scene_source.SceneSourceConfig`: generated beds, a fixed list, a pool, ``free_radius``). A ``SceneConfig`` (or its mapping form, e.g. ``{"placement": {"num_mushrooms": 10}}``): a new bed of it per reset; scenes or a ``sms3d generate`` folder (checksums verified): one drawn per reset (``options={"scene": k}``); None: a new 25-mushroom bed per reset, every mushroom free |
+    | ``target`` | ``str`` or ``TargetRule`` | ``"tallest"`` | which mushroom is picked (:class:`~sms3d_env.targets.TargetRule`: ``"tallest"``, ``"largest"``, ``"random"``, ``"index"`` with its ``index``, ``max_tilt_deg``); ``options={"target": i}`` picks mushroom ``i`` for one reset |
+    | ``pose_source`` | ``str`` or ``PoseSource`` | ``"oracle"`` | the target estimate in the observation: ``"oracle"``, ``"noisy"``, ``"perception"`` or a callable ``(scene, id, rng) -> PoseEstimate`` (e.g. ``NoisyPose(error_deg, position_std=0.002)``, ``PerceptionPose(detector=...)``) |
+    | ``pose_error_deg`` | ``float`` or ``(low, high)`` | 0.0 | the ``"noisy"`` source's rotation error (deg), or a pair: drawn per episode uniformly in it (``UniformNoisyPose``); refused with any other source |
+    | ``reward_type`` | ``str`` or ``RewardConfig`` | ``"dense"`` | ``"dense"``, ``"sparse"`` or ``"staged"``, or :class:`~sms3d_env.rewards.RewardConfig` (``kind``, the staged reward's ``horizon``) |
+    | ``physics`` | ``PickPhysicsParams`` or None | None | the picking model's numbers (None: the defaults, the robot's cup radius) |
+    | ``controller`` | ``ControllerConfig`` or None | None | :class:`~sms3d_env.controller.ControllerConfig`: control period and physics substeps, the IK's speeds and weights, and its posture target (``posture_target``, :mod:`sms3d_env.posture`) |
+    | ``start`` | ``PregraspStart`` or None | None | where the arm starts (:mod:`sms3d_env.start_states`): None at home; ``PregraspStart(share)`` that share of resets on the way to a pre-grasp pose (a reverse curriculum; ``set_pregrasp_start`` changes the share between episodes) |
+    | ``suction_mode`` | ``str`` | ``"momentary"`` | ``"momentary"`` (any command <= 0 releases the seal) or ``"latched"`` (the vacuum valve holds its state: once a seal forms it stays on whatever the command, as a picker's valve does after its vacuum switch trips) |
+    | ``end_on_dead_end`` | ``bool`` | False | also terminate (as a failure) when the episode can no longer succeed |
+    | ``task_obs`` | ``bool`` | False | add ``tool_in_target``, ``progress`` and ``wrist_wrench`` to the observation |
+    | ``image_obs`` | ``bool`` or ``ImageObservation`` | False | RGB-D observations: True for :class:`~sms3d_env.cameras.ImageObservation`'s defaults (64 × 64 from ``"overhead"``), or the record (``size``, ``camera``) |
+    | ``render_camera`` | ``str``, ``RenderCamera`` or None | None | what ``render()`` shows: a camera of ``world.CAMERAS``, or :class:`~sms3d_env.cameras.RenderCamera` (``name``, ``size``, default 480 × 640); None: the ``"pick"`` camera, placed at each reset beyond the target as seen from the robot's mount, looking at its cap top |
+
+    ``SMS3DPickTrain-v1`` sets the training options: ``suction_mode="latched"``,
+    ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
+
     ## Version history
     - v1: the robot is physically honest. A Cartesian gantry harvester (``robot="gantry"``, the
       default) or a Jaco hanging above the bed (``robot="jaco"``), every link of either
       colliding with the soil and with every mushroom; every mushroom is free and rooted
-      (``free_radius=None``), so any link that touches a cap is judged by the same bruise and
-      disturbed-neighbour rules as the tool. ``info`` gains ``time_s``; the failure cause
-      ``not_reached`` separates approaches that stopped short from seals that failed.
+      (``SceneSourceConfig.free_radius=None``), so any link that touches a cap is judged by the
+      same bruise and disturbed-neighbour rules as the tool. ``info`` gains ``time_s``; the
+      failure cause ``not_reached`` separates approaches that stopped short from seals that
+      failed. The constructor's arguments were regrouped into 16, the options of one concern
+      in one record (``scene``, ``target``, ``reward_type``, ``controller``, ``start``,
+      ``image_obs``, ``render_camera``); the same ids make the same episodes.
     - v0: the Jaco beside the bed below the soil line; its base, shoulder, upper arm, forearm and
       first wrist link collide with nothing, and only the mushrooms within 10 cm of the target
-      collide with anything (``free_radius=0.10``). Superseded by v1; its measurements stay in the
-      results history.
-
-    Args:
-        render_mode: ``"rgb_array"``, ``"depth_array"`` (metric depth in metres) or ``"human"``
-            (MuJoCo's passive viewer, synced at every reset and step, closed by ``close()``; it
-            needs a display, see :mod:`sms3d_env.viewer`, else ``DisplayUnavailableError``).
-        scene_config: ``generator.SceneConfig`` for a new seeded scene per reset (default: 25
-            mushrooms), or its mapping form (``SceneConfig.from_dict``, e.g. ``{"placement":
-            {"num_mushrooms": 10}}``), which keeps the env's spec JSON (Minari datasets and RL Zoo
-            recipes rebuild the env from it). Ignored when ``scenes`` is given.
-        scenes: a fixed list of ``generator.Scene`` objects, or the folder of a ``sms3d generate``
-            dataset (checksums verified); one is drawn per reset (``options={"scene": k}``).
-        pose_source: ``"oracle"``, ``"noisy"``, ``"perception"`` or a callable
-            ``(scene, id, rng) -> PoseEstimate``.
-        pose_error_deg, position_noise: the ``"noisy"`` source's rotation error (deg) and
-            position noise standard deviation (m); refused with any other source.
-        pose_error_range_deg: ``(low, high)``: the ``"noisy"`` source's rotation error drawn per
-            episode, uniformly in that range (``UniformNoisyPose``), instead of
-            ``pose_error_deg``; a spec that stays JSON where the source object would not.
-        target_rule: ``"tallest"``, ``"largest"``, ``"index"`` (with ``target_index``),
-            ``"random"``; ``options={"target": i}`` overrides it for one reset.
-        reward_type: ``"dense"``, ``"sparse"`` or ``"staged"``.
-        physics, controller: the picking model's numbers, the IK's speeds and weights.
-        robot: ``"gantry"`` (``SMS3DPick-v1``'s default: the Cartesian harvester of
-            :mod:`sms3d_env.gantry`) or ``"jaco"`` (the Kinova Jaco hanging above the bed), or a
-            ``GantryConfig`` / ``RobotConfig``; every link of either collides with the soil and
-            the mushrooms. ``None``: ``SMS3DPick-v0``'s Jaco, mounted beside the bed with five
-            links that collide with nothing.
-        control_dt, substeps: control period (s) and physics steps per control step.
-        image_obs, image_size, camera: RGB-D observations of ``image_size`` from ``camera``.
-            ``camera``: one of ``world.CAMERAS``, for ``render()`` and image observations alike;
-            None (default): ``render()`` from ``"pick"`` (placed at each reset beyond the target
-            as seen from the robot's mount, looking at its cap top: the tool and the target in
-            view with either robot), image observations from ``"overhead"`` (the perception
-            camera; the pick camera is aimed with the true pose, a privileged view).
-        render_size: ``render()``'s (height, width).
-        max_tilt_deg: targets tilted more than this are not chosen.
-        free_radius: only mushrooms whose stem base lies within this distance (m) of the
-            target's keep a free joint and a root weld (they can be disturbed or detached); the
-            others are static bodies, which makes the simulation several times faster. ``None``:
-            every mushroom is free.
-        tool: ``"suction"`` or ``"hand"``; overrides ``robot.tool`` (default: ``"suction"``).
-        suction_mode: ``"momentary"`` (default: any command <= 0 releases the seal) or
-            ``"latched"`` (the vacuum valve holds its state: once a seal forms it stays on
-            whatever the command, as a picker's valve does after its vacuum switch trips).
-        end_on_dead_end: also terminate (as a failure) when the episode can no longer succeed.
-        task_obs: add ``tool_in_target``, ``progress`` and ``wrist_wrench``.
-        horizon: control steps per episode that the staged reward's success bonus assumes (the
-            registered time limit, 250).
-        scene_pool, pool_seed: > 0: draw each reset's bed from a pool of this many
-            ``scene_config`` beds (seeds ``pool_seed ..``, each generated on first use and kept,
-            the compiled models of the most recently drawn beds and targets cached, at most
-            ``scene_source.MAX_CACHED_MODELS``) instead of generating a new one.
-        posture_target: the IK's null-space posture: ``"estimate"`` (default) a pre-grasp
-            configuration solved once per episode for the *estimated* axis; ``"tool"`` solved
-            again whenever the tool axis turns more than 5 deg away from the axis of the last
-            solve, so a picker that corrects a wrong estimate is not pulled back towards it.
-        pregrasp_start: the share of resets (a probability) that start the arm on the way from
-            home to a pre-grasp pose instead of at home: the joints at a uniformly drawn fraction
-            of the way from home to a configuration with the cup on the *estimated* stem axis
-            2–8 cm above the estimated cap top, facing down it, each then moved by
-            N(0, 0.01 rad) — start states a real arm reaches by its planner from the same
-            estimate. A training option (a reverse curriculum after Florensa et al. 2017,
-            "Reverse Curriculum Generation for Reinforcement Learning"): the seal, twist and
-            lift are met from the first episodes, and the approach is learned backwards from
-            them. 0 (default) always starts at home and draws nothing from the episode's random
-            stream. ``info["start"]`` says which start an episode had (``"home"`` or
-            ``"pregrasp"``); ``set_pregrasp_start(p)`` changes the share between episodes (a
-            training schedule reaches it through ``VecEnv.env_method``).
-        reach_lateral_weight: the staged reward's approach funnel: the weight (>= 1) of the
-            tool's offset across the estimated stem axis in the reach term's distance (1, the
-            default: the plain distance to the estimated cap top). Refused with another reward.
-        reward_pose: the pose the dense and staged rewards' approach terms pull towards:
-            ``"estimate"`` (default: the pose in the observation) or ``"truth"`` (the target's
-            true cap top and stem axis at reset). A training option for pickers trained under
-            pose error: shaped towards the estimate, a correction of a wrong estimate (after the
-            wrist wrench at touch-down reveals it) costs reward until it seals; shaped towards
-            the truth, it pays. The reward is simulation-side (like the root load in the staged
-            reward): the observation stays the same either way.
-        success_payoff: the staged reward's success bonus: ``"time_left"`` (default) the
-            control steps left until ``horizon`` (the return of holding the per-step maximum to
-            the time limit: every step saved adds to every success's payoff); ``"fixed"`` always
-            ``horizon``, a success's payoff whenever it comes (still never less than loitering in
-            a stage below it), so that only the discount, not the bonus, pays for haste: a
-            training option for decisions that trade time against success, such as when to start
-            a descent. Refused with another reward.
-
-    ``SMS3DPickTrain-v0`` sets the training options: ``suction_mode="latched"``,
-    ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
+      collide with anything (``free_radius=0.10``, :func:`make_v0_env`). Superseded by v1; its
+      measurements stay in the results history.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 25}
@@ -219,93 +162,69 @@ class SMS3DPickEnv(gym.Env):
     def __init__(
         self,
         render_mode: str | None = None,
-        scene_config: Any = None,
-        scenes: Sequence[Any] | None = None,
-        pose_source: str | PoseSource = "oracle",
-        pose_error_deg: float = 0.0,
-        position_noise: float = 0.0,
-        pose_error_range_deg: Sequence[float] | None = None,
-        target_rule: str = "tallest",
-        target_index: int = 0,
-        reward_type: str = "dense",
-        physics: PickPhysicsParams | None = None,
         robot: str | RobotSpec | None = None,
-        controller: ControllerConfig | None = None,
-        control_dt: float = 0.04,
-        substeps: int = 20,
-        image_obs: bool = False,
-        image_size: tuple[int, int] = (64, 64),
-        camera: str | None = None,
-        render_size: tuple[int, int] = (480, 640),
-        max_tilt_deg: float = 45.0,
-        free_radius: float | None = 0.10,
         tool: str | None = None,
+        scene: Any = None,
+        target: str | TargetRule | Mapping[str, Any] = "tallest",
+        pose_source: str | PoseSource = "oracle",
+        pose_error_deg: float | tuple[float, float] = 0.0,
+        reward_type: str | RewardConfig | Mapping[str, Any] = "dense",
+        physics: PickPhysicsParams | None = None,
+        controller: ControllerConfig | Mapping[str, Any] | None = None,
+        start: PregraspStart | Mapping[str, Any] | None = None,
         suction_mode: str = "momentary",
         end_on_dead_end: bool = False,
         task_obs: bool = False,
-        horizon: int = 250,
-        scene_pool: int = 0,
-        pool_seed: int = 0,
-        posture_target: str = "estimate",
-        pregrasp_start: float = 0.0,
-        reach_lateral_weight: float = 1.0,
-        reward_pose: str = "estimate",
-        success_payoff: str = "time_left",
+        image_obs: bool | ImageObservation | Mapping[str, Any] = False,
+        render_camera: str | RenderCamera | Mapping[str, Any] | None = None,
     ) -> None:
         # None: v0's Jaco (five of its links collide with nothing); SMS3DPick-v1 passes a name.
         self.robot_cfg = RobotConfig() if robot is None else make_robot(robot)
-        check_env_args(render_mode=render_mode, reward_type=reward_type, control_dt=control_dt,
-                       substeps=substeps, tool=tool or self.robot_cfg.tool, suction_mode=suction_mode,
-                       horizon=horizon, scene_pool=scene_pool, pool_seed=pool_seed, scenes=scenes,
-                       pose_source=pose_source, pose_error_deg=pose_error_deg,
-                       position_noise=position_noise, pose_error_range_deg=pose_error_range_deg,
-                       target_rule=target_rule, image_size=image_size,
-                       render_size=render_size, max_tilt_deg=max_tilt_deg, free_radius=free_radius,
-                       scene_config=scene_config, posture_target=posture_target,
-                       pregrasp_start=pregrasp_start,
-                       reach_lateral_weight=reach_lateral_weight, reward_pose=reward_pose,
-                       success_payoff=success_payoff, image_obs=image_obs,
-                       end_on_dead_end=end_on_dead_end, task_obs=task_obs)
+        check_env_args(render_mode=render_mode, tool=tool or self.robot_cfg.tool, suction_mode=suction_mode,
+                       pose_source=pose_source, pose_error_deg=pose_error_deg, end_on_dead_end=end_on_dead_end,
+                       task_obs=task_obs)
         if tool is not None:
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
         self.render_mode = render_mode
-        self.scene_source = SceneSource(scene_config_of(scene_config), scenes, scene_pool, pool_seed)
-        self.pose_source = make_pose_source(pose_source, pose_error_deg, position_noise, pose_error_range_deg)
-        self.target_rule, self.target_index = target_rule, target_index
-        self.reward_type, self.reach_lateral_weight = reward_type, float(reach_lateral_weight)
-        self.reward_pose, self.success_payoff = reward_pose, success_payoff
+        self.scene_source = SceneSource(scene_source_config(scene))
+        self.target_rule = record_of(TargetRule, target, "target", shorthand="rule")
+        self.pose_source = make_pose_source(pose_source, pose_error_of(pose_error_deg))
+        self.reward_config = record_of(RewardConfig, reward_type, "reward_type", shorthand="kind")
         self.params = physics or PickPhysicsParams(cup_radius=self.robot_cfg.cup_radius)
-        self.ctrl_cfg = controller or ControllerConfig()
-        self.control_dt, self.substeps = float(control_dt), substeps
-        self.image_obs, self.image_size = bool(image_obs), tuple(image_size)
-        if camera is not None and camera not in CAMERAS:
-            raise ValueError(f"camera must be None or one of {CAMERAS}, got {camera!r}")
-        self.camera, self.render_size = camera, tuple(render_size)
-        self.max_tilt_deg = max_tilt_deg
-        self.free_radius = free_radius
-        self.suction_mode, self.end_on_dead_end = suction_mode, bool(end_on_dead_end)
-        self.task_obs, self.horizon = bool(task_obs), horizon
-        self.posture_target, self.pregrasp_start = posture_target, float(pregrasp_start)
-        self._posture_axis = np.zeros(3)  # the tool axis the posture target was solved for
+        self.ctrl_cfg = ControllerConfig() if controller is None else record_of(ControllerConfig, controller,
+                                                                               "controller")
+        self.start = None if start is None else record_of(PregraspStart, start, "start")
+        self.suction_mode, self.end_on_dead_end, self.task_obs = suction_mode, bool(end_on_dead_end), bool(task_obs)
+        if isinstance(image_obs, (bool, np.bool_)):
+            self.image_obs = ImageObservation() if image_obs else None
+        elif isinstance(image_obs, (ImageObservation, Mapping)):
+            self.image_obs = record_of(ImageObservation, image_obs, "image_obs")
+        else:  # by truthiness, image_obs="no" would switch the images on
+            raise TypeError(f"image_obs must be True or False, an ImageObservation or its mapping form, got "
+                            f"{type(image_obs).__name__} {image_obs!r}")
+        camera = RenderCamera() if render_camera is None else record_of(RenderCamera, render_camera, "render_camera",
+                                                                       shorthand="name")
+        self.render_camera = replace(camera, name=camera.name or PICK_CAMERA)  # None: the per-episode pick camera
 
-        self.ik = IKController(self.robot_cfg, self.ctrl_cfg, self.control_dt)
+        self.ik = IKController(self.robot_cfg, self.ctrl_cfg)
         self.home_q = np.asarray(self.robot_cfg.home_q, float)
         self.reach = Reachability(self.ik.model, self.ik.site, self.ik.arm_qadr, self.home_q)
+        self.posture = IKPosture(self.ik, self.reach, self.home_q)
         self.action_space = spaces.Box(-1.0, 1.0, (7,), np.float32)
         self._twist_scale = np.repeat([self.ctrl_cfg.max_linear_speed, self.ctrl_cfg.max_angular_speed], 3)
         self._obs_sizes = {**_OBS_SIZES, **(TASK_OBS_SIZES if self.task_obs else {})}
         self._obs_slices = _slices(self._obs_sizes)
         obs = {k: spaces.Box(-np.inf, np.inf, (n,), np.float64) for k, n in self._obs_sizes.items()}
-        if image_obs:
-            h, w = self.image_size
+        if self.image_obs is not None:
+            h, w = self.image_obs.size
             obs["rgb"] = spaces.Box(0, 255, (h, w, 3), np.uint8)
             obs["depth"] = spaces.Box(0.0, np.inf, (h, w, 1), np.float32)
         self.observation_space = spaces.Dict(obs)
         self.world: World | None = None
         self.picking: PickingModel | None = None
         self.target_pose = np.zeros(6)  # the estimate in the observation: cap top, stem axis
-        self._reward_goal = np.zeros(6)  # the pose the reward shapes towards (``reward_pose``)
+        self._start_label = "home"  # info["start"] of the episode
         self.done = False  # the episode terminated or was truncated
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._viewer = PassiveViewer(self.control_dt) if render_mode == "human" else None
@@ -328,46 +247,43 @@ class SMS3DPickEnv(gym.Env):
         """Control steps taken in this episode."""
         return self.picking.steps
 
+    @property
+    def control_dt(self) -> float:
+        """The control period (s): ``ControllerConfig.control_dt``."""
+        return self.ctrl_cfg.control_dt
+
     # ------------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = dict(options or {})
         scene, slot = self.scene_source.draw(self.np_random, options)
-        rule, index = ("index", int(options["target"])) if "target" in options else (self.target_rule, self.target_index)
-        target, reachable = select_target(scene, rule, self.np_random, self.reach, index=index,
-                                          max_tilt_deg=self.max_tilt_deg)
+        rule = self.target_rule
+        kind, index = ("index", int(options["target"])) if "target" in options else (rule.rule, rule.index)
+        target, reachable = select_target(scene, kind, self.np_random, self.reach, index=index,
+                                          max_tilt_deg=rule.max_tilt_deg)
         estimate = self.pose_source(scene, target, self.np_random)
         self.target_pose = np.concatenate([estimate.cap_top, estimate.stem_axis])
-        goal = estimate if self.reward_pose == "estimate" else OraclePose()(scene, target, self.np_random)
-        self._reward_goal = np.concatenate([goal.cap_top, goal.stem_axis])
         self._disown_renderers()
-        self.world = w = build_world(scene, target, self.robot_cfg, self.free_radius,
-                                     self.control_dt / self.substeps, self.scene_source.models,
+        ctrl = self.ctrl_cfg
+        self.world = w = build_world(scene, target, self.robot_cfg, self.scene_source.config.free_radius,
+                                     ctrl.control_dt / ctrl.substeps, self.scene_source.models,
                                      self._model_key(slot, target))
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
         self.done = False
         m, d = w.model, w.data
-        q_start, self._start = self.home_q, "home"
-        if self.pregrasp_start > 0 and self.np_random.random() < self.pregrasp_start:
-            q_start = self._pregrasp_configuration(estimate.cap_top, estimate.stem_axis)
-            self._start = "pregrasp"
+        q_start, self._start_label = (self.home_q, "home") if self.start is None else self.start.configuration(
+            self.np_random, self.reach, self.home_q, estimate.cap_top, estimate.stem_axis)
         d.qpos[w.arm_qadr] = q_start
         d.ctrl[:6] = q_start
         self.picking.tool.reset()
-        # Posture target of the IK: the arm's configuration at a pre-grasp pose above the
-        # *estimated* target (the pose the policy sees). Home holds the cup pointing down near the
-        # Jaco's wrist singularity (joint 5 ~ 0, joints 4 and 6 aligned); a posture target at home
-        # let the differential IK stall there, centimetres short of some pre-grasp poses.
-        q_pre = self.reach.solve(estimate.cap_top, estimate.stem_axis, (0.05, 0.03))
-        self.ik.reset(q_start, self.home_q if q_pre is None else q_pre)
-        self._posture_axis = -estimate.stem_axis / np.linalg.norm(estimate.stem_axis)
+        self.posture.reset(q_start, estimate.cap_top, estimate.stem_axis)
         mujoco.mj_forward(m, d)
         for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
             mujoco.mj_step(m, d)
         self.picking.settled()
         if self.render_mode == "human":
             self.render()
-        return self._obs(), {**self.picking.evaluate(), "start": self._start, "time_s": 0.0}
+        return self._obs(), {**self.picking.evaluate(), "start": self._start_label, "time_s": 0.0}
 
     def step(self, action: np.ndarray):
         if self.world is None:
@@ -384,14 +300,13 @@ class SMS3DPickEnv(gym.Env):
             warnings.warn("step() called after the episode ended (terminated or truncated); call "
                           "reset(). The episode stays ended.", stacklevel=2)
         picking.begin_step(float(a[6]))  # the tool's command (suction: the valve; hand: fingers)
-        if self.posture_target == "tool":
-            self._follow_tool_posture()
+        self.posture.follow(d.site_xmat[w.tool_site, 2::3])  # the tool's approach axis (its site's +z)
         try:
             d.ctrl[:6] = self.ik.step(a[:6] * self._twist_scale, d.qpos[w.arm_qadr])
         except Exception:  # mink raises when the QP has no solution: hold the last command
             pass
         badqacc = d.warning[_BADQACC]
-        for _ in range(self.substeps):
+        for _ in range(self.ctrl_cfg.substeps):
             mujoco.mj_step(m, d)
             if picking.needs_substep_check():
                 if badqacc.number > 0:
@@ -408,7 +323,7 @@ class SMS3DPickEnv(gym.Env):
         self.done = terminated or truncated
         reward, terms = self._reward(info["is_success"])
         # time_s: simulated seconds since reset (at success, the pick's cycle time).
-        info.update({f"reward_{k}": v for k, v in terms.items()}, start=self._start,
+        info.update({f"reward_{k}": v for k, v in terms.items()}, start=self._start_label,
                     time_s=picking.steps * self.control_dt)
         if ep.unstable:
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
@@ -423,42 +338,14 @@ class SMS3DPickEnv(gym.Env):
         the same whatever the target, so one model serves every target of the bed."""
         if slot is None:
             return None
-        return slot, (None if self.free_radius is None else target)
+        return slot, (None if self.scene_source.config.free_radius is None else target)
 
     def set_pregrasp_start(self, share: float) -> None:
-        """Change ``pregrasp_start`` (a probability in [0, 1]) from the next reset on."""
-        check_pregrasp_start(share)
-        self.pregrasp_start = float(share)
-
-    def _pregrasp_configuration(self, cap_top: np.ndarray, axis: np.ndarray) -> np.ndarray:
-        """``pregrasp_start``: arm joints a uniform fraction of the way from home to a pre-grasp
-        configuration (the cup 2–8 cm above the estimated cap top on the estimated axis, facing
-        down it), each joint moved by N(0, 0.01 rad) (a few millimetres and about a degree at the
-        tool); home where the pre-grasp pose has no IK solution."""
-        rng = self.np_random
-        q_pre = self.reach.solve(cap_top, axis, (0.08, rng.uniform(0.02, 0.08)))
-        if q_pre is None:
-            return self.home_q
-        q = self.home_q + rng.uniform() * (q_pre - self.home_q)
-        return np.clip(q + rng.normal(0.0, 0.01, q.shape), self.reach.lo, self.reach.hi)
-
-    def _follow_tool_posture(self) -> None:
-        """``posture_target="tool"``: keep the IK's posture target a pre-grasp configuration for
-        the tool's *current* approach axis above the estimated cap top. Measured why: with the
-        posture solved once for the estimated axis, the scripted picker driven by the *true* pose
-        picked 13 / 20 episodes at 30 deg estimate error (20 / 20 at 0 deg) — the null-space pull
-        towards the estimate's arm configuration fights any correction of the axis; following the
-        tool, 19 / 20."""
-        w = self.world
-        z = w.data.site_xmat[w.tool_site].reshape(3, 3)[:, 2]
-        if np.degrees(np.arccos(np.clip(z @ self._posture_axis, -1.0, 1.0))) <= _POSTURE_RESOLVE_DEG:
-            return
-        q = self.reach.solve(self.target_pose[:3], -z, (0.05, 0.03))
-        if q is not None:
-            self.ik.set_posture(q)
-        # A failed solve keeps the old posture but still records the axis it was tried for, so
-        # that the next attempt waits for another 5 deg turn instead of repeating every step.
-        self._posture_axis = z.copy()
+        """Start this share of episodes (a probability in [0, 1]) on the way to a pre-grasp pose
+        from the next reset on: ``start=PregraspStart(share)`` (a training schedule reaches it
+        through ``VecEnv.env_method``)."""
+        check_share("share", share)
+        self.start = PregraspStart(float(share))
 
     def failure_cause(self) -> str | None:
         """Why the episode is not (yet) a success, or None on success."""
@@ -470,16 +357,15 @@ class SMS3DPickEnv(gym.Env):
         d = w.data
         s = RewardState(
             tool_pos=d.site_xpos[w.tool_site], tool_axis=d.site_xmat[w.tool_site, 2::3],
-            goal_cap_top=self._reward_goal[:3], goal_axis=self._reward_goal[3:],
+            goal_cap_top=self.target_pose[:3], goal_axis=self.target_pose[3:],
             gripped_target=ep.grip == ep.target, target_detached=ep.target_detached,
             lift=self.picking.lift(), lift_goal=self.params.lift_height, success=success,
             bruised=bool(ep.bruised), root_utilisation=ep.root_util,
-            steps_left=self.horizon - (self.steps if self.success_payoff == "time_left" else 0),
-            lateral_weight=self.reach_lateral_weight)
-        if self.reward_type == "staged":
+            steps_left=self.reward_config.horizon - self.steps)
+        if self.reward_config.kind == "staged":
             terms = reward_terms(s)
             return sum(terms.values()), terms
-        return compute_reward(s, self.reward_type), {}
+        return compute_reward(s, self.reward_config.kind), {}
 
     # ------------------------------------------------------------------ observation
     def _obs(self) -> dict[str, np.ndarray]:
@@ -498,9 +384,8 @@ class SMS3DPickEnv(gym.Env):
         if not np.isfinite(flat).all():
             flat = np.nan_to_num(flat)
         obs = {k: flat[sl] for k, sl in self._obs_slices.items()}
-        if self.image_obs:
-            h, wd = self.image_size
-            camera = self.camera or "overhead"
+        if self.image_obs is not None:
+            (h, wd), camera = self.image_obs.size, self.image_obs.camera
             obs["rgb"] = self._render(h, wd, camera, depth=False)
             obs["depth"] = self._render(h, wd, camera, depth=True)[..., None].astype(np.float32)
         return obs
@@ -529,11 +414,6 @@ class SMS3DPickEnv(gym.Env):
         """``render_mode="human"``'s window (``viewer.is_running``); None in the other modes."""
         return self._viewer
 
-    @property
-    def render_camera(self) -> str:
-        """The camera ``render()`` shows: ``camera``, by default ``world.PICK_CAMERA``."""
-        return self.camera or PICK_CAMERA
-
     def _render(self, h: int, w: int, camera: str, depth: bool) -> np.ndarray:
         os.environ.setdefault("MUJOCO_GL", "egl")
         r = self._renderers.get((h, w))
@@ -548,18 +428,18 @@ class SMS3DPickEnv(gym.Env):
 
     def render(self) -> np.ndarray | None:
         """``rgb_array``: (H, W, 3) uint8; ``depth_array``: (H, W) float32 metres, both of
-        ``render_size`` from ``render_camera``; ``human``: show the viewer (None); None before
-        the first reset."""
+        ``render_camera.size`` from the camera ``render_camera.name``; ``human``: show the viewer
+        (None); None before the first reset."""
         if self.render_mode is None or self.world is None:
             return None
         if self.render_mode == "human":
             m, d = self.world.model, self.world.data
-            cam = m.camera(self.render_camera).id
+            cam = m.camera(self.render_camera.name).id
             eye, back = d.cam_xpos[cam], d.cam_xmat[cam].reshape(3, 3)[:, 2]
             self._viewer.show(m, d, eye, eye - PICK_CAMERA_DISTANCE * back)
             return None
-        h, w = self.render_size
-        return self._render(h, w, self.render_camera, depth=self.render_mode == "depth_array")
+        h, w = self.render_camera.size
+        return self._render(h, w, self.render_camera.name, depth=self.render_mode == "depth_array")
 
     def close(self) -> None:
         self._disown_renderers()
@@ -571,3 +451,15 @@ class SMS3DPickEnv(gym.Env):
         state["_renderers"] = {}  # GL contexts do not pickle (World carries its MjData's state)
         state["_viewer"] = None  # nor does a window
         return state
+
+
+def make_v0_env(scene: Any = None, **kwargs: Any) -> SMS3DPickEnv:
+    """The env of the ``-v0`` ids (their entry point): ``SMS3DPickEnv(**kwargs)`` (v0's Jaco
+    unless ``robot`` says otherwise) with only the mushrooms within ``V0_FREE_RADIUS`` of the
+    target free, whatever bed ``scene`` gives (a ``SceneSourceConfig`` with a ``free_radius`` of
+    its own keeps it): a ``scene`` passed to ``gym.make`` replaces the registered one whole, so the
+    v0 radius cannot be a registered argument."""
+    source = scene_source_config(scene)
+    if source.free_radius is None:
+        source = replace(source, free_radius=V0_FREE_RADIUS)
+    return SMS3DPickEnv(scene=source, **kwargs)

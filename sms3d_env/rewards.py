@@ -2,7 +2,8 @@
 staged reward of the training env (bounded per step, maximal at success).
 
 Every reward is a pure function of a ``RewardState`` record; ``reward_terms`` returns the staged
-reward's terms, which the env reports in ``info`` (``reward_<term>``).
+reward's terms, which the env reports in ``info`` (``reward_<term>``). ``RewardConfig`` is the
+env's ``reward_type`` argument.
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from sms3d_env.records import check_choice, check_int
 
 REWARD_TYPES = ("dense", "sparse", "staged")
 # Staged reward: the floor of each stage (pre-seal approach, sealed with the root holding,
@@ -26,11 +29,28 @@ ALIGN_SCALE = 3.0  # 1/rad
 
 
 @dataclass(frozen=True)
+class RewardConfig:
+    """The env's reward (its ``reward_type`` argument; a kind alone is ``RewardConfig(kind)``).
+
+    Attributes:
+        kind: ``"dense"`` (default), ``"sparse"`` or ``"staged"`` (``REWARD_TYPES``).
+        horizon: the control steps per episode that the staged reward's success bonus assumes
+            (the registered time limit, 250): the success step also pays the steps left until it.
+    """
+
+    kind: str = "dense"
+    horizon: int = 250
+
+    def __post_init__(self) -> None:
+        check_choice("RewardConfig.kind", self.kind, REWARD_TYPES)
+        check_int("RewardConfig.horizon", self.horizon, 1)
+
+
+@dataclass(frozen=True)
 class RewardState:
     tool_pos: np.ndarray
     tool_axis: np.ndarray  # cup +z (approach direction)
-    # The pose the shaping pulls towards: the *estimated* cap top and stem axis (the env's
-    # default), or the true ones (``reward_pose="truth"``, a training option).
+    # The pose the shaping pulls towards: the *estimated* cap top and stem axis (the observation's).
     goal_cap_top: np.ndarray
     goal_axis: np.ndarray
     gripped_target: bool
@@ -40,15 +60,14 @@ class RewardState:
     success: bool
     bruised: bool
     root_utilisation: float = 0.0  # target root load / its detachment capacity (>= 1 detaches)
-    steps_left: int = 0  # the staged success bonus: control steps until the time limit (or all of them)
-    lateral_weight: float = 1.0  # staged reach: weight of the offset across the goal axis
+    steps_left: int = 0  # the staged success bonus: control steps until the time limit
 
 
 def compute_reward(s: RewardState, reward_type: str) -> float:
     """Sparse: 0 on success, -1 otherwise (Gymnasium-Robotics convention).
 
     Dense: -distance to the goal cap top (m) + 0.1 x alignment of the cup axis with the goal
-    stem axis (the estimated pose unless the env's ``reward_pose="truth"``) + 0.5 sealed on the
+    stem axis (the estimated pose) + 0.5 sealed on the
     target + 1 detached *and held* + 2 x lift fraction while held + 5 success - 2 bruise. The
     detach and lift terms pay only while the cup holds the target: paid for detachment alone,
     PPO learned to knock targets off their roots and collect the bonus every step without ever
@@ -82,17 +101,11 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     | detached | holding the detached target | 0.6 + 0.3 x lift fraction |
     | success | detached, held, lifted | 1 + ``steps_left`` |
 
-    reach = 1 - mean(tanh(5/m x d), tanh(30/m x d)), d the distance from the tool to the goal
-    cap top (the *estimated* one unless the env's ``reward_pose="truth"``) with its component
-    across the goal stem axis weighted by
-    ``lateral_weight`` (1: the plain distance; > 1 a funnel that pays more for arriving along the
-    axis than from the side, where the cup's rim knocks the cap off its root; either side of the
-    cap top alike); align = 1 - tanh(3/rad x angle between the cup axis and the goal stem axis,
-    reversed). Per step the reward is at most 1, reached only at success; the success step
+    reach = 1 - mean(tanh(5/m x d), tanh(30/m x d)), d the distance (m) from the tool to the goal
+    (estimated) cap top; align = 1 - tanh(3/rad x angle between the cup axis and the goal stem
+    axis, reversed). Per step the reward is at most 1, reached only at success; the success step
     also pays ``steps_left`` (the return of holding that maximum until the time limit), so
-    finishing early is never worth less than loitering in a stage below it (the env's
-    ``success_payoff="fixed"`` passes the whole horizon instead, whenever the success comes).
-    A bruise pays 0 (it ends the episode). The root load is privileged simulation state; it
+    finishing early is never worth less than loitering in a stage below it. A bruise pays 0 (it ends the episode). The root load is privileged simulation state; it
     shapes the reward only and is never observed.
     """
     if s.bruised:
@@ -105,21 +118,10 @@ def reward_terms(s: RewardState) -> dict[str, float]:
     if s.gripped_target:
         load = min(max(s.root_utilisation, 0.0), 1.0)
         return {"stage": STAGE_FLOORS["sealed"], "progress": ROOT_WEIGHT * load, "success_bonus": 0.0}
-    d = _reach_distance(s)
+    d = math.dist(s.tool_pos, s.goal_cap_top)
     reach = 1.0 - sum(math.tanh(k * d) for k in REACH_SCALES) / len(REACH_SCALES)
     cos = float(np.clip(-(s.tool_axis @ s.goal_axis) / np.linalg.norm(s.goal_axis), -1.0, 1.0))
     align = 1.0 - math.tanh(ALIGN_SCALE * math.acos(cos))
     return {"stage": STAGE_FLOORS["approach"], "progress": APPROACH_WEIGHT * reach * align,
             "success_bonus": 0.0}
 
-
-def _reach_distance(s: RewardState) -> float:
-    """The staged reach term's distance (m): tool to goal cap top, the part across the goal
-    stem axis scaled by ``s.lateral_weight``."""
-    if s.lateral_weight == 1.0:  # bit-identical to the reward before the weight existed
-        return math.dist(s.tool_pos, s.goal_cap_top)
-    offset = np.asarray(s.tool_pos, float) - s.goal_cap_top
-    axis = s.goal_axis / np.linalg.norm(s.goal_axis)
-    along = float(offset @ axis)
-    across = float(np.linalg.norm(offset - along * axis))
-    return math.hypot(along, s.lateral_weight * across)

@@ -1,14 +1,20 @@
-"""Where each reset's bed comes from: a fixed list of scenes (or a ``sms3d generate`` dataset
-folder), a pool of generated beds, or a newly generated bed per reset."""
+"""Where each reset's bed comes from (the env's ``scene`` argument, read into a
+``SceneSourceConfig``): a fixed list of scenes (or a ``sms3d generate`` dataset folder), a pool
+of generated beds, or a newly generated bed per reset; and which of its mushrooms can move."""
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import os
 from collections import OrderedDict
-from collections.abc import Hashable, Sequence
+from collections.abc import Hashable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from sms3d_env.records import check_int, check_number, record_of
 
 #: The most compiled world models a pool keeps (the most recently used): one is 4 MB for a
 #: 10-mushroom bed and 8 MB for a 25-mushroom one, so a model per bed of a 500-bed pool held
@@ -44,11 +50,106 @@ class ModelCache(OrderedDict):
             self.popitem(last=False)
 
 
-class SceneSource:
-    """The beds of ``SMS3DPickEnv`` (its ``scene_config``, ``scenes``, ``scene_pool`` and
-    ``pool_seed`` arguments, checked by :mod:`sms3d_env.env_args`).
+@dataclass(frozen=True)
+class SceneSourceConfig:
+    """Where the beds of ``SMS3DPickEnv`` come from (its ``scene`` argument), and which of their
+    mushrooms can move.
 
     Attributes:
+        config: the ``generator.SceneConfig`` of the generated beds, or its mapping form
+            (``SceneConfig.from_dict``, e.g. ``{"placement": {"num_mushrooms": 10}}``); None: 25
+            mushrooms, the rest the generator's defaults.
+        scenes: a fixed list of ``generator.Scene`` objects, or the folder of a ``sms3d generate``
+            dataset (loaded, checksums verified, when the env is made); one is drawn per reset
+            (``options={"scene": k}`` picks one). Excludes ``config`` and ``pool``.
+        pool: > 0: draw each reset's bed from a pool of this many generated beds (seeds
+            ``pool_seed ..``, each generated on first use and kept; the compiled models of the
+            most recently drawn beds cached, at most ``MAX_CACHED_MODELS``) instead of generating
+            a new one per reset.
+        pool_seed: the seed of the pool's first bed.
+        free_radius: only mushrooms whose stem base lies within this distance (m) of the
+            target's keep a free joint and a root weld (can be disturbed or detached); the others
+            are static bodies that the robot passes through, which makes the simulation several
+            times faster (``SMS3DPick-v0``: 0.10). None (default, ``SMS3DPick-v1``): every mushroom
+            is free.
+
+    Its mapping form (:func:`~sms3d_env.records.record_of`) has these field names:
+    ``{"config": {"placement": {"num_mushrooms": 10}}, "pool": 500}``.
+    """
+
+    config: Any = None
+    scenes: Any = None
+    pool: int = 0
+    pool_seed: int = 0
+    free_radius: float | None = None
+
+    def __post_init__(self) -> None:
+        from generator.config import SceneConfig
+        from generator.errors import ConfigError
+
+        if isinstance(self.config, Mapping):
+            try:
+                object.__setattr__(self, "config", SceneConfig.from_dict(self.config))
+            except ConfigError as exc:
+                raise ConfigError(f"SceneSourceConfig.config.{exc.field}", exc.message) from None
+        if self.config is not None and not isinstance(self.config, SceneConfig):
+            raise TypeError(f"SceneSourceConfig.config must be None, a generator.SceneConfig or its mapping form, "
+                            f"got {type(self.config).__name__} {self.config!r}")
+        if self.scenes is not None and not isinstance(self.scenes, (str, os.PathLike)):
+            if not isinstance(self.scenes, Sequence) or isinstance(self.scenes, bytes) or not self.scenes:
+                raise ValueError(f"SceneSourceConfig.scenes must be None, a dataset folder or a non-empty list of "
+                                 f"generator.Scene, got {self.scenes!r}")
+            from generator.scene import Scene
+
+            for k, scene in enumerate(self.scenes):
+                if not isinstance(scene, Scene):
+                    raise TypeError(f"SceneSourceConfig.scenes[{k}] must be a generator.Scene, got "
+                                    f"{type(scene).__name__}")
+            object.__setattr__(self, "scenes", tuple(self.scenes))
+        check_int("SceneSourceConfig.pool", self.pool)
+        check_int("SceneSourceConfig.pool_seed", self.pool_seed)
+        if self.scenes is not None and self.config is not None:
+            raise ValueError("SceneSourceConfig.config sets the generated beds; with scenes given it would be ignored")
+        if self.scenes is not None and self.pool:
+            raise ValueError("SceneSourceConfig.pool draws generated beds; with scenes given it would be ignored")
+        if self.free_radius is not None:
+            check_number("SceneSourceConfig.free_radius", self.free_radius, 1e-9, math.inf,
+                         "None or a finite number > 0 (m)")
+
+
+#: The fields of ``SceneSourceConfig``: a mapping with any of them is its mapping form, any other
+#: mapping a ``SceneConfig``'s.
+_SOURCE_FIELDS = frozenset(f.name for f in dataclasses.fields(SceneSourceConfig))
+
+
+def scene_source_config(scene: Any) -> SceneSourceConfig:
+    """The env's ``scene`` argument as a ``SceneSourceConfig``: None (a new 25-mushroom bed per
+    reset), a ``generator.SceneConfig`` or its mapping form, a list of ``generator.Scene``, a
+    dataset folder (``str`` or path), or a ``SceneSourceConfig`` or its mapping form (a mapping
+    with any of its field names). ``TypeError`` for anything else."""
+    from generator.config import SceneConfig
+
+    if scene is None:
+        return SceneSourceConfig()
+    if isinstance(scene, SceneSourceConfig):
+        return scene
+    if isinstance(scene, Mapping):
+        if _SOURCE_FIELDS & set(scene):
+            return record_of(SceneSourceConfig, scene, "scene")
+        return SceneSourceConfig(config=scene)
+    if isinstance(scene, SceneConfig):
+        return SceneSourceConfig(config=scene)
+    if isinstance(scene, (str, os.PathLike, Sequence)) and not isinstance(scene, bytes):
+        return SceneSourceConfig(scenes=scene)
+    raise TypeError(f"scene must be None, a generator.SceneConfig or its mapping form, a list of generator.Scene, "
+                    f"a dataset folder or a SceneSourceConfig, got {type(scene).__name__} {scene!r}")
+
+
+class SceneSource:
+    """The beds of ``SMS3DPickEnv``, drawn as its ``SceneSourceConfig`` says.
+
+    Attributes:
+        config: that ``SceneSourceConfig``.
         scenes: the fixed scenes (a dataset folder's, loaded with their checksums verified), or None.
         pool: pool slot -> its bed, each generated on first use and kept (a bed is far smaller
             than its compiled model).
@@ -56,17 +157,16 @@ class SceneSource:
             cache), the ``MAX_CACHED_MODELS`` most recently used.
     """
 
-    def __init__(self, scene_config: Any = None, scenes: Sequence[Any] | str | os.PathLike | None = None,
-                 scene_pool: int = 0, pool_seed: int = 0) -> None:
+    def __init__(self, config: SceneSourceConfig) -> None:
+        self.config = config
+        scenes = config.scenes
         if isinstance(scenes, (str, os.PathLike)):
             from generator.dataset.readers import load_scenes
 
             scenes = load_scenes(scenes)
             if not scenes:
-                raise ValueError("scenes: the dataset folder holds no complete scene")
+                raise ValueError(f"SceneSourceConfig.scenes: the dataset folder {config.scenes} holds no complete scene")
         self.scenes = list(scenes) if scenes is not None else None
-        self.scene_config = scene_config
-        self.scene_pool, self.pool_seed = scene_pool, pool_seed
         self.pool: dict[int, Any] = {}
         self.models = ModelCache(MAX_CACHED_MODELS)
 
@@ -79,12 +179,12 @@ class SceneSource:
             return self.scenes[k], None
         import generator
 
-        cfg = self.scene_config
+        cfg = self.config.config
         if cfg is None:
             cfg = generator.SceneConfig().replace(placement__num_mushrooms=25)
-        if not self.scene_pool:
+        if not self.config.pool:
             return generator.generate_scene(cfg, seed=int(rng.integers(2**31 - 1))), None
-        k = int(rng.integers(self.scene_pool))
+        k = int(rng.integers(self.config.pool))
         if k not in self.pool:
-            self.pool[k] = generator.generate_scene(cfg, seed=self.pool_seed + k)
+            self.pool[k] = generator.generate_scene(cfg, seed=self.config.pool_seed + k)
         return self.pool[k], k

@@ -1,20 +1,52 @@
 """Target selection and reachability.
 
-Rules: ``"tallest"`` (highest cap top among reachable mushrooms, the default: the cup meets it
-before any neighbour), ``"largest"`` (cap diameter), ``"index"`` (``target_index``), ``"random"``.
+Rules (``TargetRule``, the env's ``target`` argument): ``"tallest"`` (highest cap top among
+reachable mushrooms, the default: the cup meets it before any neighbour), ``"largest"`` (cap
+diameter), ``"index"`` (``TargetRule.index``), ``"random"``.
 Reachability: inverse kinematics (bounded least squares on the arm-only model) reaches a
 pre-grasp pose above the cap top along the stem axis and the grasp pose itself.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
 import numpy as np
 from scipy.optimize import least_squares
 
+from sms3d_env.records import check_choice, check_int, check_number
+
 RULES = ("tallest", "largest", "index", "random")
+
+
+@dataclass(frozen=True)
+class TargetRule:
+    """Which mushroom of the bed an episode picks (the env's ``target`` argument; a rule name
+    alone is ``TargetRule(rule)``; ``reset(options={"target": i})`` picks mushroom ``i`` for one
+    reset).
+
+    Attributes:
+        rule: ``"tallest"`` (default), ``"largest"``, ``"random"`` (each among the reachable
+            mushrooms tilted no more than ``max_tilt_deg``), or ``"index"``.
+        index: the mushroom ``rule="index"`` picks (an index into the scene's instances);
+            refused with another rule, which would ignore it.
+        max_tilt_deg: mushrooms whose stem axis is tilted more than this from vertical (deg)
+            are not chosen by the other rules.
+    """
+
+    rule: str = "tallest"
+    index: int = 0
+    max_tilt_deg: float = 45.0
+
+    def __post_init__(self) -> None:
+        check_choice("TargetRule.rule", self.rule, RULES)
+        check_int("TargetRule.index", self.index)
+        if self.index and self.rule != "index":
+            raise ValueError(f"TargetRule.index picks a mushroom for rule='index'; with rule={self.rule!r} it "
+                             f"would be ignored (got index={self.index!r})")
+        check_number("TargetRule.max_tilt_deg", self.max_tilt_deg, 0.0, 90.0, "a finite number in [0, 90] (deg)")
 
 
 class Reachability:

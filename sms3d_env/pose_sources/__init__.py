@@ -20,20 +20,17 @@ __all__ = ["NoisyPose", "OraclePose", "PerceptionPose", "PoseEstimate", "PoseSou
            "UniformNoisyPose", "make_pose_source"]
 
 
-def make_pose_source(kind: str | PoseSource, pose_error_deg: float = 0.0,
-                     position_std: float = 0.0,
-                     pose_error_range_deg: tuple[float, float] | None = None) -> PoseSource:
-    """``"oracle"``, ``"noisy"`` (with ``pose_error_range_deg``: :class:`UniformNoisyPose`, the
-    error drawn per episode), ``"perception"`` (the two-stage pipeline with the shipped pose
-    network, :class:`PerceptionPose`) or any callable pose source."""
+def make_pose_source(kind: str | PoseSource, error_deg: float | tuple[float, float] = 0.0) -> PoseSource:
+    """``"oracle"``, ``"noisy"`` (rotated by exactly ``error_deg``, :class:`NoisyPose`; a ``(low,
+    high)`` pair: the error drawn per episode, :class:`UniformNoisyPose`), ``"perception"`` (the
+    two-stage pipeline with the shipped pose network, :class:`PerceptionPose`) or any callable pose
+    source (a ``NoisyPose`` with position noise, a ``PerceptionPose`` with another detector)."""
     if callable(kind):
         return kind
-    if kind == "noisy" and pose_error_range_deg is not None:
-        return UniformNoisyPose(*pose_error_range_deg)
     if kind == "oracle":
         return OraclePose()
     if kind == "noisy":
-        return NoisyPose(pose_error_deg, position_std)
+        return UniformNoisyPose(*error_deg) if isinstance(error_deg, tuple) else NoisyPose(error_deg)
     if kind == "perception":
         return PerceptionPose()
     raise ValueError(f"pose_source must be 'oracle', 'noisy', 'perception' or a callable, got {kind!r}")

@@ -157,13 +157,14 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
 
 
 def base_slice(rows: Sequence[dict[str, Any]]) -> RowAxes:
-    """The axes of the 1-D report: the first robot (in ``ROBOTS``' order), tool and bed size of the
-    noisy-source rows, the smallest position error; whatever order the rows come in."""
+    """The axes of the 1-D report: the noisy-source rows' first robot in ``ROBOTS``' order (rows of
+    a sweep's part files come sorted by name), their first tool and bed size in row order, the
+    smallest position error."""
     from sms3d_env.robot_names import ROBOTS
 
     noisy = [axes(r) for r in rows if r.get("source", "noisy") == "noisy"] or [axes(r) for r in rows]
-    panel = min({a.panel for a in noisy},
-                key=lambda p: (ROBOTS.index(p[0]) if p[0] in ROBOTS else len(ROBOTS), p[0], p[1], p[2]))
+    # min() keeps the first of equal keys: panels of one robot stay in row order.
+    panel = min(dict.fromkeys(a.panel for a in noisy), key=lambda p: ROBOTS.index(p[0]) if p[0] in ROBOTS else len(ROBOTS))
     return RowAxes(*panel, min(a.position_error_mm for a in noisy if a.panel == panel))
 
 

@@ -17,6 +17,7 @@
 | the shipped policies' features extractor (``NormalizedFlatten``) | :mod:`~sms3d_env.training.policy_features` |
 | a saved policy as a picker (``load_model``, ``PolicyActor``, ``SHIPPED_POLICY``, ``SHIPPED_TRIGGER``) | :mod:`~sms3d_env.training.actor` |
 | a run's files: atomic model saves, observation statistics without pickles (``ObservationStats``, ``PolicyFileError``) | :mod:`~sms3d_env.training.model_files` |
+| what a model's policy is built from instead of SB3's pickled entries (``PolicySpec``) | :mod:`~sms3d_env.training.policy_spec` |
 | success of a saved policy (``evaluate_policy_success``) | :mod:`~sms3d_env.training.evaluation` |
 | learning curves of runs (``read_curve``, ``sms3d learning-curve``) | :mod:`~sms3d_env.training.learning_curve` |
 | ``sms3d train-policy`` / ``train-trigger`` / ``eval-policy`` (``register``, ``main``; ``python -m sms3d_env.training``) | :mod:`~sms3d_env.training.cli` |
@@ -37,6 +38,7 @@ _EXPORTS = {
     "NormalizedFlatten": "policy_features",
     "SHIPPED_POLICY": "actor", "SHIPPED_TRIGGER": "actor", "PolicyActor": "actor", "load_model": "actor",
     "OBS_STATS_FILE": "model_files", "ObservationStats": "model_files", "PolicyFileError": "model_files",
+    "PolicySpec": "policy_spec",
     "evaluate_policy_success": "evaluation", "success_line": "evaluation",
     "read_curve": "learning_curve", "register": "cli", "main": "cli",
 }  # fmt: skip

@@ -6,23 +6,39 @@ A model that RL Baselines3 Zoo saved (``python -m rl_zoo3.train``) loads too: it
 and observation statistics come from the run's ``args.yml``, ``config.yml`` and
 ``vecnormalize.pkl`` (:mod:`sms3d_env.training.zoo`).
 
-Trust: an SB3 model zip holds cloudpickled objects (its spaces, schedules, policy class), so
-loading an SB3 model from elsewhere runs code from it; load only files you trust. The observation
-statistics beside a model (``obs_rms.npz``) are plain arrays and are read without unpickling;
-an SB3 ``vecnormalize.pkl`` beside a model is never loaded, and an RL Zoo run's is decoded by a
-restricted reader that builds arrays and inert records only (:func:`~sms3d_env.training.zoo.read_vecnormalize`).
+Trust: loading runs no code from the files. An SB3 model zip holds cloudpickled entries (its
+spaces, schedules, policy class); :func:`load_sb3` unpickles none of them but rebuilds each from
+trusted data: the policy's description that :func:`~sms3d_env.training.model_files.save_model`
+writes into the zip (:class:`~sms3d_env.training.policy_spec.PolicySpec`), or for an RL Zoo run
+the env it names; the weights are tensors read by ``torch.load(weights_only=True)``. A zip without
+that description is refused (:func:`~sms3d_env.training.model_files.record_policy_spec` adds one to
+a file you trust). The observation statistics beside a model (``obs_rms.npz``) are plain arrays
+and are read without unpickling; an SB3 ``vecnormalize.pkl`` beside a model is never loaded, and
+an RL Zoo run's is decoded by a restricted reader that builds arrays and inert records only
+(:func:`~sms3d_env.training.zoo.read_vecnormalize`).
 """
 
 from __future__ import annotations
 
+import inspect
+import io
 import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from sms3d_env.env_args import translate_legacy_options
 from sms3d_env.training.config import ALGOS
-from sms3d_env.training.model_files import OBS_STATS_FILE, ObservationStats, PolicyFileError
+from sms3d_env.training.model_files import (
+    OBS_STATS_FILE,
+    POLICY_SPEC_MEMBER,
+    ObservationStats,
+    PolicyFileError,
+    read_policy_spec,
+)
+from sms3d_env.training.policy_spec import PolicySpec, algorithm_class, policy_kwargs_from_json
 from sms3d_env.training.zoo import read_vecnormalize, zoo_run_of
 
 #: The shipped pick policy (``model.zip`` with its ``config.json``, ``README.md``, metrics).
@@ -58,7 +74,7 @@ def saved_config_path(model_path: str | Path) -> Path | None:
 
 #: A checkpoint's files by part: (name infix, extension), named as SB3's ``CheckpointCallback``
 #: names them (``ppo_obs_rms_1400000_steps.npz`` beside ``ppo_1400000_steps.zip``).
-CHECKPOINT_PARTS = {"model": ("", "zip"), "obs_rms": ("obs_rms_", "npz"), "replay_buffer": ("replay_buffer_", "pkl")}
+CHECKPOINT_PARTS = {"model": ("", "zip"), "obs_rms": ("obs_rms_", "npz"), "replay_buffer": ("replay_buffer_", "npz")}
 
 
 def checkpoint_path(folder: str | Path, algo: str, steps: int, part: str = "model") -> Path:
@@ -101,17 +117,12 @@ def observation_stats_path(model_path: str | Path) -> Path | None:
     return None
 
 
-def _no_rate(_progress_remaining: float) -> float:
-    return 0.0
-
-
-def load_model(model_path: str | Path, algo: str | None = None) -> Any:
-    """Load a saved PPO/SAC model for acting; the algorithm comes from ``config.json`` beside it if
-    not given. Its learning-rate schedule is not unpickled (acting needs none, and a schedule class
-    a run was saved with, e.g. :class:`~sms3d_env.training.schedules.WallAwareLinearSchedule`,
-    need not be importable where the model is used). A file that SB3 cannot load (no zip, a cut
-    one, a zip of something else) raises ``PolicyFileError`` naming it. Loading runs code pickled
-    in the file: load only models you trust."""
+def load_model(model_path: str | Path, algo: str | None = None, spec: PolicySpec | None = None) -> Any:
+    """Load a saved PPO/SAC model for acting (:func:`load_sb3`, on the CPU); the algorithm comes
+    from ``config.json`` beside it if not given, the policy from ``spec`` or else the file's own
+    description. A schedule pickled in the file (e.g. a run's
+    :class:`~sms3d_env.training.schedules.WallAwareLinearSchedule`) becomes SB3's default: acting
+    needs none. A file that cannot be loaded so raises ``PolicyFileError`` naming it."""
     path = Path(model_path)
     if algo is None:
         cfg_file = saved_config_path(path)
@@ -119,23 +130,107 @@ def load_model(model_path: str | Path, algo: str | None = None) -> Any:
             algo = read_saved_config(cfg_file).get("algo")
     if algo is not None and algo not in ALGOS:
         raise ValueError(f"algo must be one of {ALGOS}, got {algo!r}")
-    return load_sb3(path, (algo,) if algo else ALGOS, custom_objects={"learning_rate": 0.0, "lr_schedule": _no_rate})
+    return load_sb3(path, (algo,) if algo else ALGOS, spec)
 
 
-def load_sb3(path: Path, algos: tuple[str, ...], **kwargs: Any) -> Any:
-    """``PPO.load``/``SAC.load`` of ``path`` (the first of ``algos`` that loads it, on the CPU unless
-    ``kwargs`` say otherwise); ``PolicyFileError`` naming the file when none does."""
-    from stable_baselines3 import PPO, SAC
+#: Pickled entries of an SB3 model's ``data`` that need nothing from the file: the last
+#: observations and episode records of envs that are gone (a resumed ``learn`` starts them anew)
+#: and ``lr_schedule`` (``_setup_model`` rebuilds it from ``learning_rate``). Loaded as ``None``.
+UNUSED_PICKLED_ENTRIES = ("_last_obs", "_last_original_obs", "_last_episode_starts", "ep_info_buffer",
+                          "ep_success_buffer", "lr_schedule")
+#: Entries SB3's ``save`` leaves out of ``data``: a file holding one was not written by it (and
+#: an ``env`` entry would have SB3 build an env by that name).
+NEVER_SAVED_ENTRIES = ("env", "device", "policy", "replay_buffer", "rollout_buffer", "_vec_normalize_env",
+                       "_logger", "_custom_logger")
 
-    kwargs = {"device": "cpu", **kwargs}
-    failures = []
-    for algo in algos:
-        try:
-            return (PPO if algo == "ppo" else SAC).load(str(path), **kwargs)
-        except Exception as exc:  # noqa: BLE001  (SB3 raises AssertionError, KeyError, ValueError, ... for bad files)
-            failures.append(f"{algo}: {type(exc).__name__}: {exc}")
-    raise PolicyFileError(path, f"not a stable-baselines3 {'/'.join(a.upper() for a in algos)} model, or cut short "
-                                f"({'; '.join(failures)}); retrain it or copy it again")
+
+def _is_pickled(value: Any) -> bool:
+    """SB3's mark of a cloudpickled entry (``save_util.json_to_data`` unpickles exactly these)."""
+    return isinstance(value, dict) and ":serialized:" in value
+
+
+def _trusted_entries(path: Path, data: dict[str, Any], spec: PolicySpec,
+                     hyperparameters: dict[str, Any]) -> dict[str, Any]:
+    """A value for every pickled entry of ``data`` (SB3's ``custom_objects``: SB3 takes these
+    instead of unpickling), plus the policy's class, spaces and ``policy_kwargs`` from ``spec``
+    whatever the file says: an entry of :data:`UNUSED_PICKLED_ENTRIES` is ``None``, a
+    hyperparameter (a schedule, a buffer class) is ``hyperparameters``' value or else the
+    algorithm's default. ``PolicyFileError`` naming the file for any other pickled entry."""
+    never_saved = sorted(set(data) & set(NEVER_SAVED_ENTRIES))
+    if never_saved:
+        raise PolicyFileError(path, f"holds entries that SB3's save leaves out ({never_saved}): not a model SB3 wrote")
+    kwargs = spec.policy_kwargs
+    if kwargs is None:
+        kwargs = data.get("policy_kwargs", {})
+        if _is_pickled(kwargs):
+            raise PolicyFileError(path, f"its policy_kwargs are pickled (they name classes) and it holds no "
+                                        f"{POLICY_SPEC_MEMBER} to say them")
+    try:
+        trusted = {"policy_class": spec.policy_class(), "observation_space": spec.observation_space,
+                   "action_space": spec.action_space, "policy_kwargs": policy_kwargs_from_json(kwargs)}
+    except ValueError as exc:
+        raise PolicyFileError(path, str(exc)) from None
+    defaults = {name: p.default for name, p in inspect.signature(algorithm_class(spec.algo)).parameters.items()
+                if p.default is not inspect.Parameter.empty}
+    for key, value in data.items():
+        if key in trusted or not _is_pickled(value):
+            continue
+        if key in UNUSED_PICKLED_ENTRIES:
+            trusted[key] = None
+        elif key in hyperparameters:
+            trusted[key] = hyperparameters[key]
+        elif key in defaults:
+            trusted[key] = defaults[key]
+        else:
+            raise PolicyFileError(path, f"holds a pickled entry {key!r} ({value.get(':type:')}) that is not rebuilt "
+                                        "without unpickling it, and unpickling runs code from the file")
+    return trusted
+
+
+def load_sb3(path: str | Path, algos: tuple[str, ...], spec: PolicySpec | None = None,
+             hyperparameters: dict[str, Any] | None = None, env: Any = None, device: str = "cpu") -> Any:
+    """A PPO/SAC model from ``path`` without unpickling anything in it: SB3's ``load`` with every
+    pickled entry of the zip's ``data`` given in its place (:func:`_trusted_entries`), the policy
+    built from ``spec`` or else the zip's :data:`~sms3d_env.training.model_files.POLICY_SPEC_MEMBER`,
+    and the weights read by ``torch.load(weights_only=True)``. ``algos``: the algorithms the
+    model may be; ``hyperparameters``: values for pickled constructor arguments (a resumed run's
+    learning-rate schedule); ``env``: the env to go on training in.
+
+    ``PolicyFileError`` naming the file when it is no SB3 model (or cut short), holds no
+    description of its policy (saved by an earlier version, by RL Baselines3 Zoo or SB3 itself:
+    :func:`~sms3d_env.training.model_files.record_policy_spec` adds one to a file you trust), is
+    of another algorithm, or does not load as the policy it describes."""
+    path = Path(path)
+    names = "/".join(a.upper() for a in algos)
+    # Read once: SB3 loads these bytes, not the file again, which could have changed since.
+    try:
+        raw = path.read_bytes()
+        archive = zipfile.ZipFile(io.BytesIO(raw))
+        data = json.loads(archive.read("data").decode("utf-8"))
+        if not isinstance(data, dict):
+            raise ValueError("its data is no JSON object")
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise PolicyFileError(path, f"not a stable-baselines3 {names} model, or cut short ({type(exc).__name__}: "
+                                    f"{exc}); retrain it or copy it again") from None
+    try:
+        recorded = read_policy_spec(archive)
+    except (ValueError, zipfile.BadZipFile) as exc:
+        raise PolicyFileError(path, f"its {POLICY_SPEC_MEMBER} is no policy description ({exc})") from None
+    spec = spec if spec is not None else recorded
+    if spec is None:
+        raise PolicyFileError(path, f"holds no {POLICY_SPEC_MEMBER}, the description of its policy that loading it "
+                                    "without unpickling needs (it was saved by an earlier version or by other code); "
+                                    "if you trust the file, add one with python -c \"from "
+                                    "sms3d_env.training.model_files import record_policy_spec; "
+                                    f"record_policy_spec('{path}')\" (that load runs code pickled in it)")
+    if spec.algo not in algos:
+        raise PolicyFileError(path, f"is a {spec.algo.upper()} model, not {names}")
+    trusted = _trusted_entries(path, data, spec, hyperparameters or {})
+    try:
+        return algorithm_class(spec.algo).load(io.BytesIO(raw), env=env, device=device, custom_objects=trusted)
+    except Exception as exc:  # noqa: BLE001  (SB3 raises AssertionError, KeyError, ValueError, RuntimeError, ...)
+        raise PolicyFileError(path, f"does not load as the {spec.algo.upper()} {spec.policy} it describes "
+                                    f"({type(exc).__name__}: {exc})") from None
 
 
 class PolicyActor:
@@ -146,8 +241,8 @@ class PolicyActor:
 
     Files that cannot be used raise ``PolicyFileError`` naming them, here or, for a
     ``config.json`` whose env does not give the observation the policy was trained on, in
-    :meth:`make_env` (before any step). Loading runs code pickled in the model zip: load only
-    models you trust."""
+    :meth:`make_env` (before any step). Loading runs no code from the files (:func:`load_sb3`;
+    an rl_zoo3 run's policy is built for the spaces of the env it names)."""
 
     def __init__(self, model_path: str | Path, algo: str | None = None, deterministic: bool = True) -> None:
         path = Path(model_path)
@@ -159,7 +254,8 @@ class PolicyActor:
         self.saved: dict[str, Any] = (read_saved_config(self.config_path) if self.config_path is not None
                                       else zoo_run.saved_config() if zoo_run is not None else {})
         self.env_id = self.saved.get("env_id", "SMS3DPick-v0")
-        self.env_options = dict(self.saved.get("env_options", {}))
+        # Options saved by earlier versions (e.g. the shipped trigger's posture_target) read as now.
+        self.env_options = translate_legacy_options(self.saved.get("env_options", {}))
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
         self.residual_until_held = bool(self.saved.get("residual_until_held", False))
         self.residual_approach_only = bool(self.saved.get("residual_approach_only", False))
@@ -171,7 +267,8 @@ class PolicyActor:
             raise PolicyFileError(self.config_path, "flat_observation is set but observation_keys (the flattening "
                                                     "order) is missing; retrain, or add the keys of the env's "
                                                     "observation space")
-        self.model = load_model(path, algo or self.saved.get("algo"))
+        spec = zoo_run.policy_spec(self.saved) if zoo_run is not None else None
+        self.model = load_model(path, algo or self.saved.get("algo"), spec)
         stats = observation_stats_path(path)
         self.obs_stats = (ObservationStats.load(stats) if stats is not None
                           else read_vecnormalize(zoo_run.stats_path) if zoo_run is not None and self.saved["normalize"]

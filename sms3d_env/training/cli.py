@@ -17,9 +17,7 @@ from sms3d_env.training.config import (
     POSE_SOURCES,
     POSTURE_TARGETS,
     RECIPES,
-    REWARD_POSES,
     REWARD_TYPES,
-    SUCCESS_PAYOFFS,
     VEC_ENVS,
     TrainConfig,
 )
@@ -83,9 +81,7 @@ def _cmd_train(args: Any) -> int:
                           learning_rate_by_wall=args.learning_rate_by_wall,
                           target_kl=args.target_kl, posture_target=args.posture_target,
                           pregrasp_start=args.pregrasp_start, pregrasp_anneal=args.pregrasp_anneal,
-                          reach_lateral_weight=args.reach_lateral_weight, init_model=args.init_model,
-                          critic_warmup_steps=args.critic_warmup_steps, reward_pose=args.reward_pose,
-                          success_payoff=args.success_payoff, gamma=args.gamma,
+                          init_model=args.init_model, critic_warmup_steps=args.critic_warmup_steps, gamma=args.gamma,
                           time_limit_terminal=args.time_limit_terminal, use_sde=args.use_sde,
                           sde_sample_freq=args.sde_sample_freq)
         if args.conf_file is not None:
@@ -107,7 +103,6 @@ def _cmd_train_bc(args: Any) -> int:
                "--learning-rate-final": (args.learning_rate_final is not None, "its cloning uses a constant rate"),
                "--learning-rate-by-wall": (args.learning_rate_by_wall, "its cloning uses a constant rate"),
                "--init-model": (args.init_model, "it clones from scratch"),
-               "--reach-lateral-weight": (args.reach_lateral_weight != 1, "it is trained on actions, not rewards"),
                "--residual-until-held": (args.residual_until_held, "it trains no residual"),
                "--residual-approach-only": (args.residual_approach_only, "it trains no residual"),
                "--residual-descend-trigger": (args.residual_descend_trigger, "it trains no residual"),
@@ -115,8 +110,6 @@ def _cmd_train_bc(args: Any) -> int:
                "--trigger-log-std": (args.trigger_log_std is not None, "it trains no residual"),
                "--trigger-log-std-final": (args.trigger_log_std_final is not None, "it trains no residual"),
                "--critic-warmup-steps": (args.critic_warmup_steps, "it trains no critic"),
-               "--reward-pose": (args.reward_pose != "estimate", "it is trained on actions, not rewards"),
-               "--success-payoff": (args.success_payoff != "time_left", "it is trained on actions, not rewards"),
                "--gamma": (args.gamma != TrainConfig().gamma, "it is trained on actions, not rewards"),
                "--time-limit-terminal": (args.time_limit_terminal, "it is trained on actions, not returns"),
                "--use-sde": (args.use_sde, "it explores nothing"),
@@ -272,17 +265,6 @@ def register(subparsers: Any) -> None:
     p.add_argument("--pregrasp-anneal", action="store_true",
                    help="rl/residual: lower that share as training episodes from home succeed: "
                         "P x (1 - success of the last 100 home starts), set after each rollout")
-    p.add_argument("--reach-lateral-weight", type=float, default=defaults.reach_lateral_weight, metavar="W",
-                   help="rl/residual, staged reward: weight the tool's offset across the estimated stem axis by W "
-                        "in the reach term (an approach funnel; default 1, the plain distance)")
-    p.add_argument("--reward-pose", choices=REWARD_POSES, default=defaults.reward_pose,
-                   help="rl/residual: the pose the reward's approach terms pull towards: estimate (default, the "
-                        "observed one) or truth (the true pose; for training under pose error, so that "
-                        "correcting a wrong estimate pays; the observation is the same)")
-    p.add_argument("--success-payoff", choices=SUCCESS_PAYOFFS, default=defaults.success_payoff,
-                   help="rl/residual, staged reward: the success step's bonus: time_left (default, the steps left "
-                        "to the time limit: every step saved pays) or fixed (the whole horizon, whenever the "
-                        "success comes: with --gamma near 1 the return ranks by success, not speed)")
     p.add_argument("--gamma", type=float, default=defaults.gamma,
                    help="rl/residual: the discount factor (default %(default)s)")
     p.add_argument("--time-limit-terminal", action="store_true",

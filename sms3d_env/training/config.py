@@ -17,9 +17,7 @@ TRAIN_ENV_IDS = ("SMS3DPickTrain-v1", "SMS3DPickTrain-v0")
 ENV_IDS = BASE_ENV_IDS + TRAIN_ENV_IDS
 RECIPES = ("rl", "bc", "residual")
 VEC_ENVS = ("subproc", "dummy")
-POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.env_args.POSTURE_TARGETS (kept free of scipy here)
-REWARD_POSES = ("estimate", "truth")  # = sms3d_env.env_args.REWARD_POSES
-SUCCESS_PAYOFFS = ("time_left", "fixed")  # = sms3d_env.env_args.SUCCESS_PAYOFFS
+POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.controller.POSTURE_TARGETS (kept free of mink here)
 
 
 def check_bed_size(field: str, value: Any) -> None:
@@ -36,8 +34,9 @@ def check_bed_size(field: str, value: Any) -> None:
 
 
 def env_options(posture_target: str = "estimate") -> dict[str, Any]:
-    """The env options beyond the env id's defaults that a policy is trained (and must be run) with."""
-    return {} if posture_target == "estimate" else {"posture_target": posture_target}
+    """The env options beyond the env id's defaults that a policy is trained (and must be run)
+    with, as JSON (a run's ``config.json`` keeps them): the controller's posture target."""
+    return {} if posture_target == "estimate" else {"controller": {"posture_target": posture_target}}
 
 
 @dataclass(frozen=True)
@@ -59,7 +58,9 @@ class TrainConfig:
             per step instead of one per observation key (×1.4 steps/s here). Saved in
             ``config.json`` with the flattening order (``observation_keys``); ``PolicyActor``
             flattens dict observations so.
-        pose_source, pose_error_deg, position_noise: the target pose estimate used in training.
+        pose_source, pose_error_deg, position_noise: the target pose estimate used in training
+            (``position_noise`` > 0, m: the env's ``pose_source`` is ``NoisyPose(pose_error_deg,
+            position_std=position_noise)``).
         env_id: ``"SMS3DPick-v1"`` (its options as given here) or ``"SMS3DPickTrain-v1"`` (the
             learnable options: latched suction, staged reward, dead-end episode end, task
             observations; ``reward_type`` is then ignored and must stay at its default).
@@ -73,8 +74,8 @@ class TrainConfig:
             checkpoints of a seed-0 run with raw rewards: the policy step of a minibatch was scaled by
             0.007 on a rollout with successes (returns up to 141) against 0.04 on one without
             (docs/results-training.md).
-        scene_pool: > 0: each env draws its beds from a pool of this many (the env's
-            ``scene_pool``; resets then cost physics, not placement and compilation).
+        scene_pool: > 0: each env draws its beds from a pool of this many
+            (``SceneSourceConfig.pool``; resets then cost physics, not placement and compilation).
         residual_scale: > 0 trains a residual on top of the scripted picker
             (:class:`sms3d_env.training.residual.ResidualPicker` with this scale); 0: the policy acts alone.
         residual_until_held: the residual corrects only until the seal (or grip) holds; the
@@ -100,8 +101,8 @@ class TrainConfig:
             becomes the one its deterministic mean fires (:func:`~sms3d_env.training.schedules.
             trigger_noise_schedule`). ``None`` (default): a constant noise.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
-            uniformly in that range (``pose_source`` must then be ``"noisy"`` and
-            ``pose_error_deg`` 0).
+            uniformly in that range (the env's ``pose_error_deg=(low, high)``; ``pose_source``
+            must then be ``"noisy"``, ``pose_error_deg`` and ``position_noise`` 0).
         reward_type: ``"dense"``, ``"sparse"`` or ``"staged"``.
         num_mushrooms: mushrooms per generated scene.
         max_episode_steps: episode limit (the registered env uses 250).
@@ -125,26 +126,16 @@ class TrainConfig:
             rollout's policy exceeds 1.5 x this (None: no limit, SB3's default). A residual on a
             working controller needs it: without one its updates ran at KL 0.03-0.07 and undid
             seals the scripted picker made.
-        posture_target: the env's IK posture, ``"estimate"`` (default) or ``"tool"`` (re-solved
-            as the tool turns; lets a policy correct a wrong estimate). Saved in ``config.json``
-            as ``env_options`` so that evaluation rebuilds the same env.
+        posture_target: the env's IK posture (``ControllerConfig.posture_target``),
+            ``"estimate"`` (default) or ``"tool"`` (re-solved as the tool turns; lets a policy
+            correct a wrong estimate). Saved in ``config.json`` as ``env_options`` so that
+            evaluation rebuilds the same env.
         pregrasp_start: the share of training resets that start the arm on the way from home to a
-            pre-grasp pose above the estimated target (the env's ``pregrasp_start``, a reverse
-            curriculum); periodic and final evaluations always start at home.
+            pre-grasp pose above the estimated target (the env's ``start=PregraspStart(share)``, a
+            reverse curriculum); periodic and final evaluations always start at home.
         pregrasp_anneal: lower that share after each rollout to ``pregrasp_start × (1 − s)``,
             ``s`` the success rate of the last 100 training episodes that started at home
             (:mod:`sms3d_env.training.curriculum`); needs ``pregrasp_start`` > 0.
-        reach_lateral_weight: the staged reward's approach funnel (the env's
-            ``reach_lateral_weight``): the weight of the tool's offset across the estimated stem
-            axis in the reach term (1: the plain distance). Needs the staged reward.
-        reward_pose: the pose the reward's approach terms pull towards (the env's
-            ``reward_pose``): ``"estimate"`` (default) or ``"truth"`` (for pickers trained under
-            pose error: a correction towards the true axis pays). Training envs only; the
-            observation is the same either way.
-        success_payoff: the staged reward's success bonus (the env's ``success_payoff``):
-            ``"time_left"`` (default, grows with every step saved) or ``"fixed"`` (the horizon,
-            whenever the success comes; with ``gamma`` near 1 the return then ranks behaviours
-            by how often they succeed rather than how fast). Needs the staged reward.
         time_limit_terminal: the step that reaches the time limit terminates the episode instead
             of truncating it, so that PPO does not bootstrap the return there with the critic's
             value (:mod:`sms3d_env.training.time_limit`; right for the training id, whose
@@ -216,9 +207,6 @@ class TrainConfig:
     posture_target: str = "estimate"
     pregrasp_start: float = 0.0
     pregrasp_anneal: bool = False
-    reach_lateral_weight: float = 1.0
-    reward_pose: str = "estimate"
-    success_payoff: str = "time_left"
     time_limit_terminal: bool = False
     init_model: str | None = None
     critic_warmup_steps: int = 0
@@ -299,8 +287,8 @@ class TrainConfig:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:
                 raise bad("pose_error_range_deg", "must be (low, high) with 0 <= low <= high <= 180")
-            if self.pose_source != "noisy" or self.pose_error_deg:
-                raise bad("pose_error_range_deg", "needs pose_source='noisy' and pose_error_deg=0")
+            if self.pose_source != "noisy" or self.pose_error_deg or self.position_noise:
+                raise bad("pose_error_range_deg", "needs pose_source='noisy', pose_error_deg=0 and position_noise=0")
             object.__setattr__(self, "pose_error_range_deg", rng)
         for name in ("total_steps", "n_envs", "torch_threads", "num_mushrooms", "max_episode_steps", "eval_episodes",
                      "batch_size", "n_steps", "buffer_size"):
@@ -345,21 +333,6 @@ class TrainConfig:
             raise bad("pregrasp_anneal", "must be a bool")
         if self.pregrasp_anneal and not self.pregrasp_start:
             raise bad("pregrasp_anneal", "lowers pregrasp_start, which is 0 (set a share > 0)")
-        if not (isinstance(self.reach_lateral_weight, (int, float)) and not isinstance(self.reach_lateral_weight, bool)
-                and math.isfinite(self.reach_lateral_weight) and self.reach_lateral_weight >= 1):
-            raise bad("reach_lateral_weight", "must be a finite number >= 1")
-        if self.reach_lateral_weight != 1 and self.env_id in BASE_ENV_IDS and self.reward_type != "staged":
-            raise bad("reach_lateral_weight", "shapes the staged reward only (use SMS3DPickTrain-v1 or "
-                                              "reward_type='staged')")
-        if self.reward_pose not in REWARD_POSES:
-            raise bad("reward_pose", f"must be one of {REWARD_POSES}")
-        if self.reward_pose != "estimate" and self.env_id in BASE_ENV_IDS and self.reward_type == "sparse":
-            raise bad("reward_pose", "shapes the dense and staged rewards; the sparse reward has none")
-        if self.success_payoff not in SUCCESS_PAYOFFS:
-            raise bad("success_payoff", f"must be one of {SUCCESS_PAYOFFS}")
-        if self.success_payoff != "time_left" and self.env_id in BASE_ENV_IDS and self.reward_type != "staged":
-            raise bad("success_payoff", "sets the staged reward's success bonus (use SMS3DPickTrain-v1 or "
-                                        "reward_type='staged')")
         if not isinstance(self.time_limit_terminal, bool):
             raise bad("time_limit_terminal", "must be a bool")
         if self.time_limit_terminal and self.env_id in BASE_ENV_IDS:
@@ -393,27 +366,25 @@ class TrainConfig:
             raise bad("out", "must be a non-empty path")
         object.__setattr__(self, "net_arch", tuple(int(h) for h in self.net_arch))
 
-    def env_kwargs(self, pose_source: str | None = None, pose_error_deg: float | None = None) -> dict[str, Any]:
+    def env_kwargs(self, pose_source: str | None = None, pose_error_deg: float | None = None,
+                   evaluation: bool = False) -> dict[str, Any]:
+        """``make_env`` arguments of the run's envs: its training envs, or with ``evaluation`` its
+        evaluation env (fresh beds instead of the pool, every episode from home); ``pose_source``
+        and ``pose_error_deg`` replace the run's pose condition (its drawn error range too)."""
+        from sms3d_env.scene_source import SceneSourceConfig
+        from sms3d_env.start_states import PregraspStart
+
         kw = env_kwargs(self.num_mushrooms, pose_source or self.pose_source,
                         self.pose_error_deg if pose_error_deg is None else pose_error_deg,
                         self.position_noise, self.reward_type, self.max_episode_steps)
         if self.env_id in TRAIN_ENV_IDS:
             kw.pop("reward_type")  # the training id sets its own
         if self.pose_error_range_deg is not None and pose_error_deg is None:
-            from sms3d_env.pose_sources import UniformNoisyPose
-
-            kw.pop("pose_error_deg")
-            kw["pose_source"] = UniformNoisyPose(*self.pose_error_range_deg)
-        if self.scene_pool:
-            kw["scene_pool"] = self.scene_pool
-        if self.pregrasp_start:
-            kw["pregrasp_start"] = float(self.pregrasp_start)
-        if self.reach_lateral_weight != 1:
-            kw["reach_lateral_weight"] = float(self.reach_lateral_weight)
-        if self.reward_pose != "estimate":
-            kw["reward_pose"] = self.reward_pose
-        if self.success_payoff != "time_left":
-            kw["success_payoff"] = self.success_payoff
+            kw["pose_error_deg"] = self.pose_error_range_deg
+        if self.scene_pool and not evaluation:
+            kw["scene"] = SceneSourceConfig(config=kw["scene"], pool=self.scene_pool)
+        if self.pregrasp_start and not evaluation:
+            kw["start"] = PregraspStart(float(self.pregrasp_start))
         kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale,
                 "residual_until_held": self.residual_until_held,
@@ -434,13 +405,19 @@ class TrainConfig:
 
 def env_kwargs(num_mushrooms: int, pose_source: str, pose_error_deg: float, position_noise: float = 0.0,
                reward_type: str = "dense", max_episode_steps: int = 250) -> dict[str, Any]:
+    """``make_env`` arguments for a bed size, a pose condition (``position_noise`` > 0: a
+    ``NoisyPose`` with that position noise, m) and a reward."""
     import generator
 
-    kw = {
-        "scene_config": generator.SceneConfig().replace(placement__num_mushrooms=int(num_mushrooms)),
+    kw: dict[str, Any] = {
+        "scene": generator.SceneConfig().replace(placement__num_mushrooms=int(num_mushrooms)),
         "pose_source": pose_source, "reward_type": reward_type,
         "max_episode_steps": int(max_episode_steps),
     }
-    if pose_source == "noisy":  # the env refuses pose errors it would ignore
-        kw.update(pose_error_deg=float(pose_error_deg), position_noise=float(position_noise))
+    if pose_source == "noisy" and position_noise:
+        from sms3d_env.pose_sources import NoisyPose
+
+        kw["pose_source"] = NoisyPose(float(pose_error_deg), position_std=float(position_noise))
+    elif pose_source == "noisy":  # the env refuses pose errors it would ignore
+        kw["pose_error_deg"] = float(pose_error_deg)
     return kw

@@ -232,10 +232,21 @@ class _EpisodeOutcome:
 
 
 def pose_source_of(env_kwargs: dict[str, Any]) -> dict[str, Any]:
-    """The pose source an env's keyword arguments set: ``pose_source`` and its error arguments."""
-    names = ("pose_error_deg", "position_noise", "pose_error_range_deg")
+    """The pose source an env's keyword arguments set: ``pose_source`` and its ``pose_error_deg``
+    (a number, or a drawn range as ``[low, high]``)."""
     return {"pose_source": env_kwargs.get("pose_source", "oracle"),
-            **{k: env_kwargs[k] for k in names if env_kwargs.get(k) is not None}}
+            **({"pose_error_deg": env_kwargs["pose_error_deg"]} if env_kwargs.get("pose_error_deg") else {})}
+
+
+def recovered_env(dataset: Any) -> gym.Env:
+    """The env ``dataset`` was recorded in, rebuilt from its env spec as Minari's
+    ``recover_environment()`` does, but by the id's current registration and with the env options
+    of earlier versions read as now (:func:`~sms3d_env.env_args.translate_legacy_options`), so that
+    datasets recorded before the env's arguments were regrouped still rebuild their env."""
+    from sms3d_env.env_args import translate_legacy_options
+
+    spec = dataset.env_spec
+    return gym.make(spec.id, max_episode_steps=spec.max_episode_steps, **translate_legacy_options(spec.kwargs))
 
 
 def check_recordable(env: gym.Env) -> None:
@@ -247,8 +258,8 @@ def check_recordable(env: gym.Env) -> None:
         kwargs = getattr(env.spec, "kwargs", {})
         raise DatasetError(f"the env {getattr(env.spec, 'id', env)} cannot be recorded: its keyword arguments "
                            f"{sorted(kwargs)} are not JSON ({exc}), so a dataset could not rebuild it; pass the "
-                           "pose source by name (pose_error_range_deg for a drawn error) and scene_config as "
-                           "a SceneConfig or its mapping") from None
+                           "pose source by name (pose_error_deg=(low, high) for a drawn error), and every record "
+                           "(scene, controller, start, ...) in its mapping form") from None
 
 
 def record_datasets(targets: Sequence[tuple[str, gym.Env]], make_expert: Callable[[gym.Env], Callable[..., Any]],

@@ -74,7 +74,7 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
     from sms3d_env.training.threads import torch_threads
 
     with torch_threads(1):  # per-step inference of a small MLP: more threads only add overhead
-        env = actor.make_env(**kw, **({"render_mode": "rgb_array", "render_size": tuple(video_size)}
+        env = actor.make_env(**kw, **({"render_mode": "rgb_array", "render_camera": {"size": tuple(video_size)}}
                                       if video_dir else {}))
         causes: Counter[str] = Counter()
         successes = reachable = reach_succ = detached = held = 0

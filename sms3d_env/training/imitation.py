@@ -168,10 +168,10 @@ def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
     """``gym.make(TRAIN_ENV_ID, **kwargs)`` arguments for a bed size and pose error (fixed, or
     drawn per episode in ``pose_error_range_deg``) and the IK posture option; JSON, so that an
     env spec made with them rebuilds the env (a Minari dataset's ``recover_environment``)."""
-    kw: dict[str, Any] = {"scene_config": {"placement": {"num_mushrooms": int(num_mushrooms)}},
+    kw: dict[str, Any] = {"scene": {"placement": {"num_mushrooms": int(num_mushrooms)}},
                           **env_options(posture_target)}
     if pose_error_range_deg is not None:
-        kw.update(pose_source="noisy", pose_error_range_deg=tuple(float(v) for v in pose_error_range_deg))
+        kw.update(pose_source="noisy", pose_error_deg=tuple(float(v) for v in pose_error_range_deg))
     elif pose_error_deg > 0:
         kw.update(pose_source="noisy", pose_error_deg=float(pose_error_deg))
     return kw
@@ -216,6 +216,7 @@ def _reuse_or_record(ids: list[str], record: Any) -> list[Any]:
 def given_demos(cfg: BCConfig) -> list[Any]:
     """The datasets ``cfg.demos`` (none: ``[]``), checked to be of the env the clone runs in:
     ``TRAIN_ENV_ID`` with ``cfg.posture_target`` (``DatasetError`` naming the dataset)."""
+    from sms3d_env.env_args import translate_legacy_options
     from sms3d_env.training.demonstrations import DatasetError, open_dataset
 
     datasets = [open_dataset(i) for i in cfg.demos]
@@ -224,7 +225,8 @@ def given_demos(cfg: BCConfig) -> list[Any]:
         if spec is None or spec.id != TRAIN_ENV_ID:
             raise DatasetError(f"dataset {dataset_id!r} was recorded on {getattr(spec, 'id', 'an env it cannot rebuild')}; "
                                f"the bc recipe clones on {TRAIN_ENV_ID} (sms3d record-demos --env-id {TRAIN_ENV_ID})")
-        posture = spec.kwargs.get("posture_target", "estimate")
+        controller = translate_legacy_options(spec.kwargs).get("controller") or {}
+        posture = controller.get("posture_target", "estimate")
         if posture != cfg.posture_target:
             raise DatasetError(f"dataset {dataset_id!r} was recorded with posture_target={posture!r}; set "
                                f"BCConfig.posture_target (--posture-target) to it")
@@ -251,17 +253,17 @@ def own_demos(cfg: BCConfig, root: Path, progress: bool = True) -> list[Any]:
 def dagger_round(cfg: BCConfig, round_: int, demo_sets: list[Any], actor: Any, root: Path,
                  progress: bool = True) -> list[Any]:
     """DAgger round ``round_``'s labelled episodes in the Minari folder ``root``:
-    ``bc/dagger<round_>-<k>-v0`` in the env of the ``k``-th demonstration dataset (its
-    ``recover_environment()``), the clone ``actor`` acting except with probability
+    ``bc/dagger<round_>-<k>-v0`` in the env of the ``k``-th demonstration dataset
+    (:func:`~sms3d_env.training.demonstrations.recovered_env`), the clone ``actor`` acting except with probability
     ``0.5**round_``; reused when complete. Seeds from ``cfg.seed + 100000 × round_``, disjoint
     from the demonstrations' and the evaluations'."""
-    from sms3d_env.training.demonstrations import minari_root
+    from sms3d_env.training.demonstrations import minari_root, recovered_env
 
     first = cfg.seed + 100_000 * round_
     ids = [f"bc/dagger{round_}-{k}-v0" for k in range(len(demo_sets))]
     with minari_root(root):
         return _reuse_or_record(ids, lambda: _record(
-            cfg, [(i, d.recover_environment()) for i, d in zip(ids, demo_sets, strict=True)],
+            cfg, [(i, recovered_env(d)) for i, d in zip(ids, demo_sets, strict=True)],
             range(first, first + cfg.dagger_episodes), actor, beta=0.5**round_, desc=f"DAgger round {round_}",
             progress=progress))
 

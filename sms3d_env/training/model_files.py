@@ -1,16 +1,22 @@
-"""The files of a policy run on disk: models saved through a temporary file and a rename, and the
-observation statistics of a normalised run as plain arrays (``obs_rms.npz``), never a pickle.
+"""The files of a policy run on disk: models saved through a temporary file and a rename, each
+with the description of its policy that a load without unpickling needs, and the observation
+statistics of a normalised run and SAC's replay buffer as plain arrays, never a pickle.
 
 Why: SB3's ``model.save`` writes its zip in place, so a run killed while saving left an empty or
-cut ``model.zip`` or checkpoint; and SB3's ``VecNormalize.save`` pickles the whole wrapper, so
-loading the statistics unpickled whatever the file held. :func:`save_model` (through
+cut ``model.zip`` or checkpoint; SB3's ``VecNormalize.save`` and ``save_replay_buffer`` pickle
+the whole object, so loading them unpickled whatever the file held; and SB3's zip pickles the
+policy class, spaces and schedules. :func:`save_model` (through
 :func:`generator.files.write_via_temp`) serves every save of a run (final model, best model,
-checkpoints); :class:`ObservationStats` holds ``VecNormalize``'s running means and variances,
-read back with ``allow_pickle=False``.
+checkpoints) and adds :data:`POLICY_SPEC_MEMBER` to the zip
+(:class:`~sms3d_env.training.policy_spec.PolicySpec`, read back by
+:func:`~sms3d_env.training.actor.load_sb3`); :class:`ObservationStats` holds ``VecNormalize``'s
+running means and variances, and :func:`save_replay_buffer` a replay buffer's arrays, read back
+with ``allow_pickle=False``.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import zipfile
 from dataclasses import dataclass
@@ -20,9 +26,14 @@ from typing import Any
 import numpy as np
 
 from generator.files import write_via_temp
+from sms3d_env.training.config import ALGOS
+from sms3d_env.training.policy_spec import PolicySpec, algorithm_class
 
 #: The observation statistics beside a normalised run's ``model.zip`` (and ``best/best_model.zip``).
 OBS_STATS_FILE = "obs_rms.npz"
+#: The entry of a model zip that describes its policy as JSON (:class:`PolicySpec`); SB3 reads
+#: only ``data`` and the ``.pth`` entries, so the zip stays an ordinary SB3 model.
+POLICY_SPEC_MEMBER = "sms3d_policy.json"
 _FORMAT = 1
 
 
@@ -40,8 +51,108 @@ class PolicyFileError(ValueError):
 
 
 def save_model(model: Any, path: str | Path) -> None:
-    """An SB3 model's ``save`` to ``path`` (a ``.zip``), atomically."""
-    write_via_temp(path, model.save)
+    """An SB3 PPO/SAC model's ``save`` to ``path`` (a ``.zip``) with its :data:`POLICY_SPEC_MEMBER`,
+    atomically. ``ValueError`` naming what the spec cannot describe (another algorithm or policy,
+    a ``policy_kwargs`` entry that is no JSON data), before anything is written."""
+    spec = PolicySpec.of(model)
+
+    def write(tmp: Path) -> None:
+        model.save(tmp)
+        _add_policy_spec(tmp, spec)
+
+    write_via_temp(path, write)
+
+
+def _add_policy_spec(zip_path: Path, spec: PolicySpec) -> None:
+    """Append :data:`POLICY_SPEC_MEMBER` to the zip at ``zip_path``; its other entries keep their bytes."""
+    with zipfile.ZipFile(zip_path, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr(POLICY_SPEC_MEMBER, json.dumps(spec.to_json(), indent=1))
+
+
+def read_policy_spec(archive: zipfile.ZipFile) -> PolicySpec | None:
+    """The :class:`PolicySpec` in a model zip, ``None`` when it holds none; ``ValueError`` naming
+    the field of one that is not a spec."""
+    if POLICY_SPEC_MEMBER not in archive.namelist():
+        return None
+    try:
+        data = json.loads(archive.read(POLICY_SPEC_MEMBER).decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"not JSON ({exc})") from None
+    return PolicySpec.from_json(data)
+
+
+def record_policy_spec(path: str | Path, algo: str | None = None) -> None:
+    """Add :data:`POLICY_SPEC_MEMBER` to a model zip saved without one (by an earlier version of
+    this package, by RL Baselines3 Zoo, by SB3's own ``model.save``), atomically; every other entry
+    keeps its bytes (the weights are not touched). ``algo``: ``"ppo"``/``"sac"``, else each is
+    tried. This loads the file with SB3's own loader, which unpickles its entries and so runs any
+    code they carry: use it only on files you trust."""
+    path = Path(path)
+    raw = path.read_bytes()
+    try:
+        with zipfile.ZipFile(io.BytesIO(raw)) as archive:
+            if POLICY_SPEC_MEMBER in archive.namelist():
+                raise PolicyFileError(path, f"already holds {POLICY_SPEC_MEMBER}")
+    except zipfile.BadZipFile:
+        raise PolicyFileError(path, "not a model zip") from None
+    failures = []
+    for name in (algo,) if algo else ALGOS:
+        try:
+            model = algorithm_class(name).load(str(path), device="cpu")
+            break
+        except Exception as exc:  # noqa: BLE001  (SB3 raises AssertionError, KeyError, ValueError, ... for bad files)
+            failures.append(f"{name}: {type(exc).__name__}: {exc}")
+    else:
+        raise PolicyFileError(path, f"SB3 does not load it ({'; '.join(failures)})")
+    spec = PolicySpec.of(model)
+
+    def write(tmp: Path) -> None:
+        tmp.write_bytes(raw)
+        _add_policy_spec(tmp, spec)
+
+    write_via_temp(path, write)
+
+
+def _replay_arrays(buffer: Any) -> dict[str, np.ndarray]:
+    """The arrays of an SB3 ``ReplayBuffer``/``DictReplayBuffer`` by name (a dict buffer's
+    observations per key: ``observations.<key>``)."""
+    arrays: dict[str, np.ndarray] = {}
+    for name in ("observations", "next_observations", "actions", "rewards", "dones", "timeouts"):
+        value = getattr(buffer, name, None)  # no next_observations with optimize_memory_usage
+        if isinstance(value, dict):
+            arrays.update({f"{name}.{k}": v for k, v in value.items()})
+        elif value is not None:
+            arrays[name] = value
+    return arrays
+
+
+def save_replay_buffer(buffer: Any, path: str | Path) -> None:
+    """An SB3 replay buffer's arrays and write position to ``path`` (``.npz``), atomically."""
+    arrays = {**_replay_arrays(buffer), "pos": np.int64(buffer.pos), "full": np.bool_(buffer.full)}
+    write_via_temp(path, lambda tmp: np.savez(tmp, **arrays))
+
+
+def load_replay_buffer(buffer: Any, path: str | Path) -> None:
+    """Fill ``buffer`` (the run's own, as its model built it) with what :func:`save_replay_buffer`
+    wrote, unpickling nothing; ``PolicyFileError`` naming the file when it is missing, cut or of
+    another buffer (other arrays, shapes or dtypes)."""
+    targets = _replay_arrays(buffer)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if set(z.files) != {*targets, "pos", "full"}:
+                raise ValueError(f"arrays {sorted(z.files)}, expected {sorted({*targets, 'pos', 'full'})}")
+            for name, target in targets.items():
+                saved = z[name]
+                if saved.shape != target.shape or saved.dtype != target.dtype:
+                    raise ValueError(f"{name} is {saved.dtype} {saved.shape}, the run's buffer {target.dtype} "
+                                     f"{target.shape}")
+                target[...] = saved
+            pos, full = int(z["pos"]), bool(z["full"])
+    except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
+        raise PolicyFileError(path, f"not this run's replay buffer ({type(exc).__name__}: {exc})") from None
+    if not 0 <= pos < buffer.buffer_size:
+        raise PolicyFileError(path, f"write position {pos} outside the buffer's {buffer.buffer_size} rows")
+    buffer.pos, buffer.full = pos, full
 
 
 @dataclass(frozen=True)

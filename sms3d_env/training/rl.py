@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from generator.files import write_atomic, write_via_temp
+from generator.files import write_atomic
 from generator.run_folder import open_run_folder
 from sms3d_env.training.actor import (
     checkpoint_path,
@@ -44,10 +44,14 @@ from sms3d_env.training.envs import normalized, vec_env
 from sms3d_env.training.model_files import (
     OBS_STATS_FILE,
     ObservationStats,
+    PolicyFileError,
     finished_run,
+    load_replay_buffer,
     run_settings,
     save_model,
+    save_replay_buffer,
 )
+from sms3d_env.training.policy_spec import PolicySpec, algorithm_class
 from sms3d_env.training.schedules import falling_rate, trigger_noise_schedule
 from sms3d_env.training.warmup import critic_warmup
 
@@ -60,25 +64,28 @@ def _tensorboard_available() -> bool:
     return True
 
 
-def _build_model(cfg: TrainConfig, env: Any) -> Any:
-    from stable_baselines3 import PPO, SAC
-
+def _model_arguments(cfg: TrainConfig) -> tuple[str, dict[str, Any]]:
+    """The SB3 policy name and keyword arguments of ``cfg``'s PPO/SAC model: what
+    :func:`_build_model` builds it with and what a resumed run loads its checkpoint with
+    (:func:`_resume_from`)."""
     rate: Any = cfg.learning_rate
     if cfg.learning_rate_final is not None:
         rate = falling_rate(cfg.learning_rate, cfg.learning_rate_final,
                             cfg.max_wall_s if cfg.learning_rate_by_wall else None)
     policy_kwargs = {"net_arch": list(cfg.net_arch), "log_std_init": float(cfg.log_std_init)}
     policy = "MlpPolicy" if cfg.flat_observation else "MultiInputPolicy"
+    common = dict(learning_rate=rate, gamma=cfg.gamma, policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device,
+                  verbose=cfg.verbose)
     if cfg.algo == "ppo":
-        n_steps = cfg.n_steps
-        batch = min(cfg.batch_size, n_steps * cfg.n_envs)
-        return PPO(policy, env, learning_rate=rate, n_steps=n_steps,
-                   batch_size=batch, gamma=cfg.gamma, target_kl=cfg.target_kl, policy_kwargs=policy_kwargs,
-                   use_sde=cfg.use_sde, sde_sample_freq=cfg.sde_sample_freq,
-                   seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
-    return SAC(policy, env, learning_rate=rate, buffer_size=cfg.buffer_size,
-               learning_starts=cfg.learning_starts, batch_size=cfg.batch_size, gamma=cfg.gamma,
-               policy_kwargs=policy_kwargs, seed=cfg.seed, device=cfg.device, verbose=cfg.verbose)
+        return policy, dict(common, n_steps=cfg.n_steps, batch_size=min(cfg.batch_size, cfg.n_steps * cfg.n_envs),
+                            target_kl=cfg.target_kl, use_sde=cfg.use_sde, sde_sample_freq=cfg.sde_sample_freq)
+    return policy, dict(common, buffer_size=cfg.buffer_size, learning_starts=cfg.learning_starts,
+                        batch_size=cfg.batch_size)
+
+
+def _build_model(cfg: TrainConfig, env: Any) -> Any:
+    policy, kwargs = _model_arguments(cfg)
+    return algorithm_class(cfg.algo)(policy, env, **kwargs)
 
 
 class InitModelError(ValueError):
@@ -172,7 +179,7 @@ def _start_sde_from(model: Any, path: Path, device: str) -> None:
     noise and a fresh optimiser."""
     from stable_baselines3.common.save_util import load_from_zip_file
 
-    _, params, _ = load_from_zip_file(str(path), device=device)
+    _, params, _ = load_from_zip_file(str(path), device=device, load_data=False)  # the weights: no unpickling
     if params["policy"]["log_std"].shape == model.policy.log_std.shape:
         model.set_parameters(params, exact_match=True, device=device)
         return
@@ -228,8 +235,8 @@ def _checkpoints(env: Any, folder: Path, cfg: TrainConfig) -> Any:
                 self.next_at = (self.num_timesteps // freq + 1) * freq
                 folder.mkdir(parents=True, exist_ok=True)
                 if cfg.algo == "sac":
-                    write_via_temp(checkpoint_path(folder, cfg.algo, self.num_timesteps, "replay_buffer"),
-                                  self.model.save_replay_buffer)
+                    save_replay_buffer(self.model.replay_buffer,
+                                       checkpoint_path(folder, cfg.algo, self.num_timesteps, "replay_buffer"))
                 _save_model_and_stats(self.model, env, cfg.normalize,
                                       checkpoint_path(folder, cfg.algo, self.num_timesteps),
                                       checkpoint_path(folder, cfg.algo, self.num_timesteps, "obs_rms"))
@@ -245,28 +252,35 @@ def _checkpoint_parts(cfg: TrainConfig) -> list[str]:
 
 def latest_checkpoint(folder: Path, cfg: TrainConfig) -> Path | None:
     """The model of the checkpoint in ``folder`` with the most steps whose parts are all there;
-    None when there is none."""
+    None when there is none. ``PolicyFileError`` when the latest SAC checkpoint's replay buffer
+    is SB3's pickle (``sac_replay_buffer_<N>_steps.pkl``, written by earlier versions), which is
+    not loaded: unpickling runs code from the file, and starting over would drop the run."""
     steps = sorted({n for p in folder.glob(f"{cfg.algo}_*_steps.zip") if (n := checkpoint_steps(p)) is not None},
                    reverse=True)
     for n in steps:
         if all(checkpoint_path(folder, cfg.algo, n, part).is_file() for part in _checkpoint_parts(cfg)):
             return checkpoint_path(folder, cfg.algo, n)
+        pickled = checkpoint_path(folder, cfg.algo, n, "replay_buffer").with_suffix(".pkl")
+        if cfg.algo == "sac" and pickled.is_file():
+            raise PolicyFileError(pickled, "the replay buffer is an SB3 pickle, which is not loaded (unpickling runs "
+                                           "code from the file); --overwrite to start the run anew")
     return None
 
 
 def _resume_from(checkpoint: Path, env: Any, cfg: TrainConfig) -> Any:
     """The run's model at ``checkpoint`` with what SB3 saves of its training state (weights,
-    optimiser, step count, schedules), its observation statistics in ``env`` and, for SAC, its
-    replay buffer (an SB3 pickle, like the model zip: the run's own files are trusted as its
-    models are)."""
-    model = load_sb3(checkpoint, (cfg.algo,), env=env, device=cfg.device)
-    # The saved last observation is of envs that are gone: the resumed run resets its own.
-    model._last_obs = None
+    optimiser, step count), its observation statistics in ``env`` and, for SAC, its replay
+    buffer; nothing is unpickled. The policy, spaces and schedules that SB3 pickled in the
+    checkpoint are rebuilt from the run's settings and env (:func:`_model_arguments`); the last
+    observations it pickled are of envs that are gone, and the resumed run resets its own."""
+    policy, kwargs = _model_arguments(cfg)
+    spec = PolicySpec(cfg.algo, policy, env.observation_space, env.action_space)
+    model = load_sb3(checkpoint, (cfg.algo,), spec, hyperparameters=kwargs, env=env, device=cfg.device)
     steps = checkpoint_steps(checkpoint)
     if cfg.normalize:
         ObservationStats.load(checkpoint_path(checkpoint.parent, cfg.algo, steps, "obs_rms")).apply_to(env)
     if cfg.algo == "sac":
-        model.load_replay_buffer(str(checkpoint_path(checkpoint.parent, cfg.algo, steps, "replay_buffer")))
+        load_replay_buffer(model.replay_buffer, checkpoint_path(checkpoint.parent, cfg.algo, steps, "replay_buffer"))
     return model
 
 
@@ -459,8 +473,7 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
         if cfg.eval_freq > 0:
             # Periodic evaluation under the training pose condition (fixed seeds): fresh beds, not
             # the training pool's, and every episode from home.
-            eval_kw = {k: v for k, v in cfg.env_kwargs().items() if k not in ("scene_pool", "pregrasp_start")}
-            eval_env = vec_env(eval_kw, 1, cfg.seed + 10_000, None)
+            eval_env = vec_env(cfg.env_kwargs(evaluation=True), 1, cfg.seed + 10_000, None)
             if cfg.normalize:
                 # EvalCallback copies the training statistics into it before each evaluation.
                 eval_env = normalized(eval_env, training=False)

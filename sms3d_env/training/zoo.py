@@ -11,8 +11,10 @@ read as a plain mapping; every other tag is refused. ``vecnormalize.pkl`` is a p
 ``VecNormalize``: it is decoded by a restricted reader (:func:`read_vecnormalize`) that imports
 and calls no class or function named in the file besides numpy's array and dtype constructors;
 every other object becomes an inert record of its state, from which the running means and
-variances are taken. No code from a zoo run's files runs here, but the model zip itself, which
-SB3 loads with cloudpickle: load only models you trust.
+variances are taken. The model zip's pickled entries are not unpickled either: its policy is
+built from the run's algorithm and policy name, the spaces of the env it names and the zip's
+readable ``policy_kwargs`` (:meth:`ZooRun.policy_spec`, loaded by
+:func:`~sms3d_env.training.actor.load_sb3`). No code from a zoo run's files runs here.
 """
 
 from __future__ import annotations
@@ -25,7 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from sms3d_env.env_args import translate_legacy_options
 from sms3d_env.training.model_files import ObservationStats, PolicyFileError, RunningStats
+from sms3d_env.training.policy_spec import PolicySpec
 
 #: The shipped recipes: ``sms3d_env/recipes/<name>.yml``.
 RECIPES_DIR = Path(__file__).parents[1] / "recipes"
@@ -39,14 +43,10 @@ WALL_CLOCK_LIMIT = "sms3d_env.training.rl.wall_clock_limit"
 SAME_NAME_KEYS = ("n_envs", "n_steps", "batch_size", "gamma", "learning_rate", "target_kl", "use_sde",
                   "sde_sample_freq", "buffer_size", "learning_starts")
 #: ``env_kwargs`` entries that are ``TrainConfig`` fields of the same name.
-SAME_NAME_ENV_KWARGS = ("scene_pool", "pregrasp_start", "posture_target", "reach_lateral_weight", "reward_pose",
-                        "success_payoff", "pose_source", "pose_error_deg", "position_noise", "pose_error_range_deg",
-                        "reward_type")
+SAME_NAME_ENV_KWARGS = ("pose_source", "reward_type")
 #: ``env_kwargs`` entries a policy was trained with but need not run with: the training beds, the
-#: start curriculum, the pose source and the reward's shaping (the evaluation chooses its own).
-TRAINING_ONLY_ENV_KWARGS = ("scene_config", "scenes", "scene_pool", "pool_seed", "pregrasp_start", "pose_source",
-                            "pose_error_deg", "position_noise", "pose_error_range_deg", "reach_lateral_weight",
-                            "reward_pose", "success_payoff", "render_mode")
+#: start curriculum and the pose source (the evaluation chooses its own).
+TRAINING_ONLY_ENV_KWARGS = ("scene", "start", "pose_source", "pose_error_deg", "render_mode")
 
 
 class RecipeError(ValueError):
@@ -110,14 +110,31 @@ def _callbacks(path: Path, value: Any) -> dict[str, dict[str, Any]]:
     return out
 
 
+def _scene_fields(scene: Any, bad: Any) -> dict[str, Any]:
+    """The ``TrainConfig`` fields of a recipe's ``env_kwargs.scene``: ``{"placement":
+    {"num_mushrooms": N}}`` (a ``SceneConfig``'s mapping form) or ``{"config": that, "pool": P}``
+    (a ``SceneSourceConfig``'s); ``bad(key, why)`` makes the error for anything else."""
+    source = scene if isinstance(scene, dict) and set(scene) & {"config", "pool"} else {"config": scene}
+    config = source.get("config")
+    placement = config.get("placement") if isinstance(config, dict) and set(config) == {"placement"} else None
+    if set(source) - {"config", "pool"} or not (isinstance(placement, dict) and set(placement) == {"num_mushrooms"}):
+        raise bad("env_kwargs.scene", f"TrainConfig sets config.placement.num_mushrooms and pool only, got {scene!r}")
+    return {"num_mushrooms": placement["num_mushrooms"], **({"scene_pool": source["pool"]} if "pool" in source else {})}
+
+
 def recipe_fields(path: Path, env_id: str | None = None) -> tuple[str, dict[str, Any]]:
     """``(env_id, fields)``: the ``TrainConfig`` fields that the recipe file's entry for ``env_id``
     (``None``: its only entry) sets. Every key must be one that maps onto a field, read the same
     way RL Zoo reads it (``n_timesteps`` is ``total_steps``, ``normalize`` a mapping of
-    ``norm_obs``/``norm_reward``, ``env_kwargs.scene_config.placement.num_mushrooms`` is
-    ``num_mushrooms``, the three callbacks of this package are ``pregrasp_anneal``,
-    ``learning_rate_final`` (+ ``learning_rate_by_wall``) and ``max_wall_s``); anything else is a
-    ``RecipeError`` naming the file and the key."""
+    ``norm_obs``/``norm_reward``, ``env_kwargs.scene`` is ``num_mushrooms`` (its
+    ``config.placement.num_mushrooms``) and ``scene_pool`` (its ``pool``), ``env_kwargs.start.share``
+    is ``pregrasp_start``, ``env_kwargs.controller.posture_target`` is ``posture_target``,
+    ``env_kwargs.pose_error_deg`` a (low, high) pair is ``pose_error_range_deg``, the three
+    callbacks of this package are ``pregrasp_anneal``, ``learning_rate_final`` (+
+    ``learning_rate_by_wall``) and ``max_wall_s``); anything else is a ``RecipeError`` naming the
+    file and the key. Env arguments of earlier versions (``scene_config``, ``scene_pool``,
+    ``pregrasp_start``, ...) are read as :func:`~sms3d_env.env_args.translate_legacy_options`
+    reads them."""
     data = read_zoo_yaml(path)
     if env_id is None:
         if len(data) != 1:
@@ -165,25 +182,32 @@ def recipe_fields(path: Path, env_id: str | None = None) -> tuple[str, dict[str,
         out["net_arch"] = tuple(kwargs["net_arch"])
     if "log_std_init" in kwargs:
         out["log_std_init"] = kwargs["log_std_init"]
-    env_kwargs = dict(entry.pop("env_kwargs", None) or {})
-    scene = env_kwargs.pop("scene_config", None)
-    if scene is not None:
-        if not (isinstance(scene, dict) and set(scene) == {"placement"} and isinstance(scene["placement"], dict)
-                and set(scene["placement"]) == {"num_mushrooms"}):
-            raise bad("env_kwargs.scene_config", f"TrainConfig sets placement.num_mushrooms only, got {scene!r}")
-        out["num_mushrooms"] = scene["placement"]["num_mushrooms"]
+    try:
+        env_kwargs = translate_legacy_options(dict(entry.pop("env_kwargs", None) or {}))
+    except ValueError as exc:
+        raise bad("env_kwargs", str(exc)) from None
+    if "scene" in env_kwargs:
+        out.update(_scene_fields(env_kwargs.pop("scene"), bad))
+    for key, field in (("start", "share"), ("controller", "posture_target")):
+        if key in env_kwargs:
+            value = env_kwargs.pop(key)
+            if not (isinstance(value, dict) and set(value) == {field}):
+                raise bad(f"env_kwargs.{key}", f"TrainConfig sets {key}.{field} only, got {value!r}")
+            out["pregrasp_start" if key == "start" else field] = value[field]
     for key in SAME_NAME_ENV_KWARGS:
         if key in env_kwargs:
             out[key] = env_kwargs.pop(key)
-    if "pose_error_range_deg" in out:
-        out["pose_error_range_deg"] = tuple(out["pose_error_range_deg"])
+    if "pose_error_deg" in env_kwargs:
+        error = env_kwargs.pop("pose_error_deg")
+        out["pose_error_range_deg" if isinstance(error, list) else "pose_error_deg"] = (
+            tuple(error) if isinstance(error, list) else error)
     if env_kwargs:
         raise bad("env_kwargs", f"no TrainConfig field for {sorted(env_kwargs)}")
     callbacks = _callbacks(path, entry.pop("callback", []))
     if PREGRASP_ANNEALING in callbacks:
         initial = callbacks.pop(PREGRASP_ANNEALING).get("initial")
         if initial != out.get("pregrasp_start"):
-            raise bad("callback", f"{PREGRASP_ANNEALING} anneals from env_kwargs.pregrasp_start "
+            raise bad("callback", f"{PREGRASP_ANNEALING} anneals from env_kwargs.start.share "
                                   f"({out.get('pregrasp_start')}); its initial must be the same, got {initial!r}")
         out["pregrasp_anneal"] = True
     walls = {}
@@ -324,8 +348,9 @@ class ZooRun:
         if any(w != FLATTEN_WRAPPER for w in wrappers):
             raise PolicyFileError(self.params / "config.yml", f"env_wrapper {wrappers}: the one wrapper a saved "
                                                              f"policy can run in here is {FLATTEN_WRAPPER}")
-        env_kwargs = dict(args.get("env_kwargs") or hyper.get("env_kwargs") or {})
-        placement = (env_kwargs.get("scene_config") or {}).get("placement") or {}
+        env_kwargs = translate_legacy_options(args.get("env_kwargs") or hyper.get("env_kwargs") or {})
+        scene = env_kwargs.get("scene") or {}
+        placement = ((scene.get("config") if "config" in scene else scene) or {}).get("placement") or {}
         saved: dict[str, Any] = {
             "recipe": "rl_zoo3", "algo": algo, "env_id": env_id,
             "env_options": {k: v for k, v in env_kwargs.items() if k not in TRAINING_ONLY_ENV_KWARGS},
@@ -333,17 +358,35 @@ class ZooRun:
         if isinstance(placement.get("num_mushrooms"), int):
             saved["num_mushrooms"] = placement["num_mushrooms"]
         if wrappers:
-            saved["observation_keys"] = _observation_keys(env_id, saved["env_options"])
+            saved["observation_keys"] = list(_env_spaces(env_id, saved["env_options"])[0].spaces)
         return saved
 
+    def policy_spec(self, saved: dict[str, Any]) -> PolicySpec:
+        """What the run's model is loaded with instead of its pickled entries: the algorithm of
+        ``saved`` (:meth:`saved_config`), the policy named in ``config.yml``, and the observation
+        (flattened as ``FlattenObservation`` flattens it, for a flat run) and action spaces of
+        the env it names; its ``policy_kwargs`` are the model zip's readable ones.
+        ``PolicyFileError`` naming ``config.yml`` when these do not make a policy spec."""
+        import gymnasium as gym
 
-def _observation_keys(env_id: str, env_options: dict[str, Any]) -> list[str]:
-    """The keys of ``env_id``'s dict observation in the order ``FlattenObservation`` concatenates them."""
+        config = self.params / "config.yml"
+        observation, action = _env_spaces(saved["env_id"], saved["env_options"])
+        if saved["flat_observation"]:
+            observation = gym.spaces.flatten_space(observation)
+        try:
+            return PolicySpec(saved["algo"], read_zoo_yaml(config).get("policy"), observation, action)
+        except ValueError as exc:
+            raise PolicyFileError(config, f"not a policy this package loads ({exc})") from None
+
+
+def _env_spaces(env_id: str, env_options: dict[str, Any]) -> tuple[Any, Any]:
+    """``env_id``'s observation space (a ``Dict``, keys in the order ``FlattenObservation``
+    concatenates them) and action space."""
     from sms3d_env.training.envs import make_env
 
     env = make_env(env_id, **env_options)
     try:
-        return list(env.observation_space.spaces)
+        return env.observation_space, env.action_space
     finally:
         env.close()
 

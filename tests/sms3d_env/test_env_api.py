@@ -11,19 +11,20 @@ import pytest
 
 import generator
 import sms3d_env  # noqa: F401  (registers the ids)
+from sms3d_env.cameras import ImageObservation, RenderCamera
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
 
 
 def make(**kw):
-    return gym.make("SMS3DPick-v0", scene_config=SMALL, **kw)
+    return gym.make("SMS3DPick-v0", scene=SMALL, **kw)
 
 
 def test_registered_ids():
     for env_id in ("SMS3DPick-v0", "SMS3DPickSparse-v0"):
         assert env_id in gym.registry
-    env = gym.make("SMS3DPickSparse-v0", scene_config=SMALL)
-    assert env.unwrapped.reward_type == "sparse"
+    env = gym.make("SMS3DPickSparse-v0", scene=SMALL)
+    assert env.unwrapped.reward_config.kind == "sparse"
 
 
 # Unbounded observations (velocities, forces) are intended; Gymnasium-Robotics allows the same.
@@ -113,7 +114,7 @@ def test_pickle_round_trip(tool):
 @pytest.mark.parametrize("tool", ["suction", "hand"])
 @pytest.mark.parametrize("mode", ["rgb_array", "depth_array"])
 def test_render_modes(mode, tool):
-    env = make(render_mode=mode, render_size=(48, 64), tool=tool, camera="overhead")
+    env = make(render_mode=mode, render_camera=RenderCamera("overhead", (48, 64)), tool=tool)
     env.reset(seed=0)
     img = env.render()
     if mode == "rgb_array":
@@ -126,7 +127,7 @@ def test_render_modes(mode, tool):
 
 
 def test_image_observations():
-    env = make(image_obs=True, image_size=(32, 40))
+    env = make(image_obs=ImageObservation(size=(32, 40)))
     obs, _ = env.reset(seed=0)
     assert obs["rgb"].shape == (32, 40, 3) and obs["depth"].shape == (32, 40, 1)
     assert env.observation_space.contains(obs)

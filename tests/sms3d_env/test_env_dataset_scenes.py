@@ -13,7 +13,7 @@ def test_env_reads_scenes_from_a_dataset_folder(tmp_path):
                   "--workers", "1", "--seed", "3"]) == 0
     scenes = load_scenes(out)
     assert len(scenes) == 2
-    env = gym.make("SMS3DPick-v0", scenes=str(out))
+    env = gym.make("SMS3DPick-v0", scene=str(out))
     env.reset(seed=0, options={"scene": 1})
     assert env.unwrapped.scene.to_json() == scenes[1].to_json()
     obs, *_ = env.step(np.zeros(env.action_space.shape, np.float32))
@@ -21,7 +21,7 @@ def test_env_reads_scenes_from_a_dataset_folder(tmp_path):
     env.close()
     (tmp_path / "empty").mkdir()
     with pytest.raises(Exception, match="manifest"):
-        gym.make("SMS3DPick-v0", scenes=str(tmp_path / "empty"))
+        gym.make("SMS3DPick-v0", scene=str(tmp_path / "empty"))
 
 
 def test_env_refuses_a_dataset_scene_whose_checksum_differs(tmp_path):
@@ -33,5 +33,5 @@ def test_env_refuses_a_dataset_scene_whose_checksum_differs(tmp_path):
     scene_json = next(out.glob("*/scene.json"))
     scene_json.write_text(scene_json.read_text().replace('"species"', ' "species"', 1))
     with pytest.raises(CorruptFileError, match="scene.json"):
-        gym.make("SMS3DPick-v0", scenes=str(out))
+        gym.make("SMS3DPick-v0", scene=str(out))
     assert len(load_scenes(out, verify=False)) == 1  # an explicit opt-out still reads it

@@ -12,7 +12,7 @@ EASY = generator.SceneConfig().replace(placement__num_mushrooms=6, placement__ti
 
 
 def test_tool_command_closes_and_opens_the_fingers():
-    env = gym.make("SMS3DPick-v0", tool="hand", scene_config=EASY)
+    env = gym.make("SMS3DPick-v0", tool="hand", scene=EASY)
     obs, _ = env.reset(seed=0)
     assert obs["suction"][0] == 0.0  # fingers open at reset
     close = np.zeros(7, np.float32)
@@ -26,7 +26,7 @@ def test_tool_command_closes_and_opens_the_fingers():
 
 
 def test_scripted_hand_pick_detaches_and_lifts_the_target():
-    env = gym.make("SMS3DPick-v0", tool="hand", scene_config=EASY)
+    env = gym.make("SMS3DPick-v0", tool="hand", scene=EASY)
     result = sms3d_env.run_episode(env, sms3d_env.ScriptedPicker.for_env(env), seed=0)
     u = env.unwrapped
     assert isinstance(sms3d_env.ScriptedPicker.for_env(env), sms3d_env.HandPicker)

@@ -19,7 +19,7 @@ def test_holding_force_from_vacuum_and_area():
 
 
 def test_mushrooms_stay_rooted_under_gravity_and_small_push():
-    env = gym.make("SMS3DPick-v0", scene_config=SMALL).unwrapped
+    env = gym.make("SMS3DPick-v0", scene=SMALL).unwrapped
     env.reset(seed=0)
     start = env.data.xpos[env.world.body_ids].copy()
     for _ in range(25):  # 1 s with the arm still
@@ -49,7 +49,7 @@ def test_noisy_pose_error_is_exact():
 
 
 def test_target_override_and_rule():
-    env = gym.make("SMS3DPick-v0", scene_config=SMALL).unwrapped
+    env = gym.make("SMS3DPick-v0", scene=SMALL).unwrapped
     _, info = env.reset(seed=0, options={"target": 2})
     assert info["target"] == 2
     _, info = env.reset(seed=0)
@@ -60,7 +60,7 @@ def test_target_override_and_rule():
 
 
 def test_failure_cause_vocabulary():
-    env = gym.make("SMS3DPick-v0", scene_config=SMALL, max_episode_steps=5)
+    env = gym.make("SMS3DPick-v0", scene=SMALL, max_episode_steps=5)
     env.reset(seed=0)
     for _ in range(5):
         *_, te, tr, info = env.step(np.zeros(7, np.float32))
@@ -76,7 +76,7 @@ TOOL_GEOMS = {
 
 @pytest.mark.parametrize("tool", list(TOOL_GEOMS))
 def test_wrist_hand_and_tool_collide_with_soil_and_mushrooms_not_with_the_arm(tool):
-    env = gym.make("SMS3DPick-v0", scene_config=SMALL, tool=tool).unwrapped
+    env = gym.make("SMS3DPick-v0", scene=SMALL, tool=tool).unwrapped
     env.reset(seed=0)
     m = env.model
 

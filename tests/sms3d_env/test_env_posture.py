@@ -1,4 +1,4 @@
-"""``posture_target``: the IK's null-space posture solved once for the estimated axis (default),
+"""``ControllerConfig.posture_target``: the IK's null-space posture solved once for the estimated axis (default),
 or again as the tool turns ("tool"), so that a picker correcting a wrong estimate is not pulled
 back to the estimate's arm configuration."""
 
@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 import sms3d_env  # noqa: F401  (registers the env ids)
-from sms3d_env.env_args import POSTURE_TARGETS
+from sms3d_env.controller import POSTURE_TARGETS
 from sms3d_env.training import config as training_config
 from sms3d_env.training import imitation
 
 
 def _posture_after_turning(posture_target: str) -> tuple[np.ndarray, np.ndarray]:
-    env = gym.make("SMS3DPick-v0", posture_target=posture_target)
+    env = gym.make("SMS3DPick-v0", controller={"posture_target": posture_target})
     try:
         env.reset(seed=1)
         u = env.unwrapped
@@ -40,19 +40,20 @@ def test_the_tool_posture_follows_a_turn_beyond_five_degrees():
 
 
 def test_a_bad_posture_target_is_refused_by_name():
-    with pytest.raises(ValueError, match="posture_target"):
-        gym.make("SMS3DPick-v0", posture_target="home")
+    with pytest.raises(ValueError, match="ControllerConfig.posture_target"):
+        gym.make("SMS3DPick-v0", controller={"posture_target": "home"})
 
 
 def test_the_training_recipes_know_the_same_posture_targets():
     assert training_config.POSTURE_TARGETS == POSTURE_TARGETS
-    assert imitation.env_options("tool") == {"posture_target": "tool"} and imitation.env_options() == {}
+    assert imitation.env_options("tool") == {"controller": {"posture_target": "tool"}}
+    assert imitation.env_options() == {}
 
 
 def test_a_failed_posture_solve_waits_for_another_turn(monkeypatch):
     """A posture the IK cannot solve is not retried on every following step (it was: 289 failing
     solves in 1,783 steps of 10 scripted episodes at 30 deg)."""
-    env = gym.make("SMS3DPick-v0", posture_target="tool")
+    env = gym.make("SMS3DPick-v0", controller={"posture_target": "tool"})
     try:
         env.reset(seed=1)
         u = env.unwrapped

@@ -1,4 +1,4 @@
-"""``pregrasp_start``: a share of resets that start the arm on the way from home to a pre-grasp
+"""``PregraspStart``: a share of resets that start the arm on the way from home to a pre-grasp
 pose above the *estimated* target (a reverse curriculum for training); 0 (default) starts at
 home and leaves the episode's random stream untouched."""
 
@@ -14,15 +14,15 @@ from hypothesis import strategies as st
 
 import generator
 import sms3d_env  # noqa: F401  (registers the env ids)
-from sms3d_env.env_args import check_env_args
 from sms3d_env.pickers.episode import run_episode
 from sms3d_env.pickers.scripted import ScriptedPicker
+from sms3d_env.start_states import PregraspStart
 
 BED = generator.SceneConfig().replace(placement__num_mushrooms=10)
 
 
 def _env(**kw):
-    return gym.make("SMS3DPickTrain-v0", scene_config=BED, **kw)
+    return gym.make("SMS3DPickTrain-v0", scene=BED, **kw)
 
 
 def _start_distance(seed: int, **kw) -> float:
@@ -38,7 +38,7 @@ def _start_distance(seed: int, **kw) -> float:
 
 def test_pregrasp_starts_lie_on_the_way_from_home_to_the_estimate():
     home = [_start_distance(seed) for seed in range(6)]
-    near = [_start_distance(seed, pregrasp_start=1.0) for seed in range(6)]
+    near = [_start_distance(seed, start=PregraspStart(1.0)) for seed in range(6)]
     # Between home and 2-8 cm above the estimated cap top; the 0.01 rad joint jitter moves the
     # tool by a few millimetres.
     for d_home, d in zip(home, near, strict=True):
@@ -48,7 +48,7 @@ def test_pregrasp_starts_lie_on_the_way_from_home_to_the_estimate():
 
 
 def test_the_scripted_picker_picks_from_a_pregrasp_start():
-    env = _env(pregrasp_start=1.0)
+    env = _env(start=PregraspStart(1.0))
     try:
         result = run_episode(env, ScriptedPicker.for_env(env.unwrapped), seed=0)
     finally:
@@ -60,7 +60,7 @@ def test_home_starts_are_the_default_and_draw_nothing_from_the_episode_stream():
     """The default starts at home without a draw; any share > 0 draws once per reset (here one
     so small that it too starts at home), so the stream after the reset differs by that draw."""
     runs = []
-    for kw in ({}, {"pregrasp_start": 1e-300}):
+    for kw in ({}, {"start": {"share": 1e-300}}):
         env = _env(**kw)
         try:
             obs, _ = env.reset(seed=3)
@@ -85,9 +85,9 @@ def test_info_names_each_episodes_start_and_the_share_can_change_between_episode
         _, info = env.reset(seed=1)
         assert info["start"] == "pregrasp"
         assert env.step(np.zeros(7))[4]["start"] == "pregrasp"
-        with pytest.raises(ValueError, match="pregrasp_start"):
+        with pytest.raises(ValueError, match="share"):
             env.get_wrapper_attr("set_pregrasp_start")(1.5)
-        assert env.unwrapped.pregrasp_start == 1.0
+        assert env.unwrapped.start == PregraspStart(1.0)
     finally:
         env.close()
 
@@ -96,10 +96,5 @@ def test_info_names_each_episodes_start_and_the_share_can_change_between_episode
 @given(st.one_of(st.floats(max_value=-1e-9), st.floats(min_value=1.0 + 1e-9), st.just(math.nan),
                  st.just(True)))
 def test_a_pregrasp_share_outside_zero_to_one_is_refused_by_name(share):
-    with pytest.raises(ValueError, match="pregrasp_start"):
-        check_env_args(
-            render_mode=None, reward_type="staged", control_dt=0.04, substeps=20, tool="suction",
-            suction_mode="latched", horizon=250, scene_pool=0, pool_seed=0, scenes=None,
-            pose_source="oracle", pose_error_deg=0.0, position_noise=0.0, target_rule="tallest",
-            image_size=(64, 64), render_size=(480, 640), max_tilt_deg=45.0, free_radius=0.1,
-            scene_config=None, pregrasp_start=share)
+    with pytest.raises(ValueError, match="PregraspStart.share"):
+        PregraspStart(share)

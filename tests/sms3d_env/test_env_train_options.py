@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 import generator
 import sms3d_env
 from sms3d_env import OraclePose, ScriptedPicker
-from sms3d_env.rewards import RewardState, reward_terms
+from sms3d_env.rewards import RewardConfig, RewardState, reward_terms
+from sms3d_env.scene_source import SceneSourceConfig
 from sms3d_env.task_obs import target_frame, tool_in_target, twist_about
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
@@ -33,7 +34,7 @@ def _run_until_sealed(env, seed=0):
 
 @pytest.mark.parametrize("mode, kept", [("latched", True), ("momentary", False)])
 def test_latched_suction_keeps_the_seal_through_off_commands(mode, kept):
-    env = gym.make("SMS3DPick-v0", scene_config=SMALL, suction_mode=mode)
+    env = gym.make("SMS3DPick-v0", scene=SMALL, suction_mode=mode)
     _run_until_sealed(env)
     off = np.zeros(7, np.float32)
     off[6] = -1.0
@@ -46,9 +47,9 @@ def test_latched_suction_keeps_the_seal_through_off_commands(mode, kept):
 def test_training_id_sets_the_options_and_passes_check_env():
     from gymnasium.utils.env_checker import check_env
 
-    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    env = gym.make("SMS3DPickTrain-v0", scene=SMALL)
     u = env.unwrapped
-    assert (u.reward_type, u.suction_mode, u.end_on_dead_end, u.task_obs) == ("staged", "latched", True, True)
+    assert (u.reward_config.kind, u.suction_mode, u.end_on_dead_end, u.task_obs) == ("staged", "latched", True, True)
     assert sms3d_env.TRAIN_OPTIONS["reward_type"] == "staged"
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -96,73 +97,12 @@ def test_staged_reward_orders_the_stages():
     assert sum(knocked_off.values()) == far  # detachment alone pays nothing
 
 
-@settings(max_examples=100, deadline=None)
-@given(height=st.floats(0.005, 0.2), weight=st.floats(1.5, 10.0), tilt=st.floats(0.0, 0.6),
-       scale=st.floats(0.5, 3.0))
-def test_the_reach_funnel_pays_more_above_the_cap_than_beside_it(height, weight, tilt, scale):
-    # The funnel follows the *estimated* axis, whatever its tilt and length.
-    unit = np.array([math.sin(tilt), 0.0, math.cos(tilt)])
-    across = np.array([math.cos(tilt), 0.0, -math.sin(tilt)])
-
-    def approach(tool_pos, w):
-        state = _reward_state(tool_pos=tool_pos, goal_axis=scale * unit, lateral_weight=w)
-        return reward_terms(state)["progress"]
-
-    top = np.array([0.0, 0.0, -0.05])
-    above, beside = top + height * unit, top + height * across
-    assert approach(above, 1.0) == pytest.approx(approach(beside, 1.0))  # the plain distance
-    assert approach(above, weight) == pytest.approx(approach(above, 1.0))  # on the axis: unchanged
-    assert approach(beside, weight) < approach(above, weight)
-
-
-def test_the_reach_funnel_needs_the_staged_reward():
-    with pytest.raises(ValueError, match="reach_lateral_weight shapes the staged reward only"):
-        sms3d_env.SMS3DPickEnv(reach_lateral_weight=3.0)
-    gym.make("SMS3DPickTrain-v0", scene_config=SMALL, reach_lateral_weight=3.0).close()  # accepted
-
-
-def _approach_progress(env, goal_cap_top, goal_axis):
-    """The staged approach term for the env's current tool pose and the given goal pose."""
-    u = env.unwrapped
-    d, site = u.data, u.world.tool_site
-    state = _reward_state(tool_pos=d.site_xpos[site].copy(), tool_axis=d.site_xmat[site, 2::3].copy(),
-                          goal_cap_top=np.asarray(goal_cap_top, float), goal_axis=np.asarray(goal_axis, float))
-    return reward_terms(state)["progress"]
-
-
-def test_reward_pose_truth_shapes_towards_the_true_pose_and_observes_the_same():
-    kw = dict(scene_config=SMALL, pose_source="noisy", pose_error_deg=30.0)
-    envs = {pose: gym.make("SMS3DPickTrain-v0", reward_pose=pose, **kw) for pose in ("estimate", "truth")}
-    obs, infos = {}, {}
-    for pose, env in envs.items():
-        env.reset(seed=3)
-        obs[pose], _, _, _, infos[pose] = env.step(np.zeros(7, np.float32))
-    for key in obs["estimate"]:
-        np.testing.assert_array_equal(obs["estimate"][key], obs["truth"][key])  # the reward is all that differs
-    truth_env, estimate_env = envs["truth"].unwrapped, envs["estimate"].unwrapped
-    inst = truth_env.scene.instances[infos["truth"]["target"]]
-    true_axis = np.asarray(inst.rotation)[:, 2]
-    assert math.degrees(math.acos(np.clip(true_axis @ estimate_env.target_pose[3:], -1, 1))) == pytest.approx(30.0, abs=1e-6)
-    assert infos["truth"]["reward_progress"] == pytest.approx(_approach_progress(envs["truth"], inst.cap_top, true_axis))
-    assert infos["estimate"]["reward_progress"] == pytest.approx(
-        _approach_progress(envs["estimate"], estimate_env.target_pose[:3], estimate_env.target_pose[3:]))
-    assert infos["truth"]["reward_progress"] != pytest.approx(infos["estimate"]["reward_progress"])
-
-
-def test_reward_pose_truth_is_the_default_reward_when_the_pose_is_exact():
-    rewards = {}
-    for pose in ("estimate", "truth"):
-        env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL, reward_pose=pose)
-        env.reset(seed=1)
-        rewards[pose] = [env.step(np.full(7, 0.3, np.float32))[1] for _ in range(5)]
-    assert rewards["truth"] == rewards["estimate"]
-
-
-@pytest.mark.parametrize("payoff", ["time_left", "fixed"])
-def test_scripted_success_is_reported_with_reward_terms(payoff):
-    """The success step pays the steps left, or with ``success_payoff="fixed"`` the whole horizon
-    (the same bed, the same picks: only the last reward differs)."""
-    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL, success_payoff=payoff)
+@pytest.mark.parametrize("horizon", [None, 300])
+def test_scripted_success_is_reported_with_reward_terms(horizon):
+    """The success step pays the steps left until the reward's horizon (the registered time limit,
+    250, by default; the same bed, the same picks: only the last reward differs)."""
+    reward = {} if horizon is None else {"reward_type": RewardConfig("staged", horizon)}
+    env = gym.make("SMS3DPickTrain-v0", scene=SMALL, **reward)
     picker = ScriptedPicker.for_env(env)
     obs, _ = env.reset(seed=1)
     done, rewards = False, []
@@ -172,7 +112,7 @@ def test_scripted_success_is_reported_with_reward_terms(payoff):
         done = terminated or truncated
     assert info["is_success"] and terminated
     assert info["reward_stage"] == 1.0
-    assert info["reward_success_bonus"] == (250 - len(rewards) if payoff == "time_left" else 250)
+    assert info["reward_success_bonus"] == (horizon or 250) - len(rewards)
     assert len(rewards) > 1 and max(rewards[:-1]) < 1.0 and rewards[-1] == 1.0 + info["reward_success_bonus"]
 
 
@@ -186,7 +126,7 @@ def _nearest_neighbour_pose(scene, i, rng):
 
 @pytest.mark.parametrize("dead_end", [True, False])
 def test_a_latched_seal_on_a_neighbour_ends_the_episode(dead_end):
-    env = gym.make("SMS3DPick-v0", scene_config=BED, pose_source=_nearest_neighbour_pose,
+    env = gym.make("SMS3DPick-v0", scene=BED, pose_source=_nearest_neighbour_pose,
                    suction_mode="latched", end_on_dead_end=dead_end)
     picker = ScriptedPicker.for_env(env)
     obs, info = env.reset(seed=1)
@@ -228,7 +168,7 @@ def test_target_frame_entries_for_a_known_pose():
 
 
 def test_task_observation_matches_the_tool_and_estimate():
-    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    env = gym.make("SMS3DPickTrain-v0", scene=SMALL)
     obs, _ = env.reset(seed=3)
     for _ in range(4):
         obs, *_ = env.step(env.action_space.sample() * 0.3)
@@ -243,7 +183,7 @@ def test_task_observation_matches_the_tool_and_estimate():
 
 
 def test_wrist_sensor_reads_the_tool_weight_at_rest():
-    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    env = gym.make("SMS3DPickTrain-v0", scene=SMALL)
     obs, _ = env.reset(seed=0)
     for _ in range(10):
         obs, *_ = env.step(np.zeros(7, np.float32))
@@ -254,7 +194,7 @@ def test_wrist_sensor_reads_the_tool_weight_at_rest():
 
 
 def test_step_after_the_end_warns_and_stays_terminated():
-    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL).unwrapped  # no TimeLimit/order wrapper
+    env = gym.make("SMS3DPickTrain-v0", scene=SMALL).unwrapped  # no TimeLimit/order wrapper
     picker = ScriptedPicker.for_env(env)
     obs, _ = env.reset(seed=1)
     terminated = False
@@ -267,24 +207,27 @@ def test_step_after_the_end_warns_and_stays_terminated():
 
 BAD_ARGS = [
     ({"pose_source": "oracle", "pose_error_deg": 10.0}, "pose_error_deg"),
-    ({"pose_source": "oracle", "position_noise": 0.01}, "position_noise"),
-    ({"target_rule": "nonsense"}, "target_rule"),
-    ({"image_size": (0, 0)}, "image_size"),
-    ({"image_size": (-4, 64)}, "image_size"),
-    ({"render_size": (480,)}, "render_size"),
-    ({"max_tilt_deg": float("nan")}, "max_tilt_deg"),
-    ({"free_radius": -1.0}, "free_radius"),
-    ({"scene_config": "foo"}, "scene_config"),
+    ({"pose_source": "noisy", "pose_error_deg": (30.0, 10.0)}, "pose_error_deg"),
+    ({"pose_source": "noisy", "pose_error_deg": 200.0}, "pose_error_deg"),
+    ({"target": "nonsense"}, "TargetRule.rule"),
+    ({"target": {"rule": "tallest", "index": 3}}, "TargetRule.index"),  # only the index rule reads it
+    ({"target": {"rul": "index"}}, "TargetRule has no field 'rul'"),
+    ({"target": {"max_tilt_deg": float("nan")}}, "TargetRule.max_tilt_deg"),
+    ({"image_obs": {"size": (0, 0)}}, "ImageObservation.size"),
+    ({"image_obs": {"camera": "wrist"}}, "ImageObservation.camera"),
+    ({"render_camera": {"size": (480,)}}, "RenderCamera.size"),
+    ({"render_camera": "wrist"}, "RenderCamera.name"),
+    ({"scene": {"free_radius": -1.0}}, "SceneSourceConfig.free_radius"),
+    ({"scene": {"pool": -1}}, "SceneSourceConfig.pool"),
+    ({"scene": 3}, "scene must be"),
     ({"suction_mode": "sticky"}, "suction_mode"),
     ({"tool": "hand", "suction_mode": "latched"}, "suction_mode"),
-    ({"horizon": 0}, "horizon"),
-    ({"reward_type": "staged", "reach_lateral_weight": 0.5}, "reach_lateral_weight"),
-    ({"reward_type": "staged", "reach_lateral_weight": float("inf")}, "reach_lateral_weight"),
-    ({"reward_type": "staged", "reach_lateral_weight": float("nan")}, "reach_lateral_weight"),
-    ({"reward_pose": "oracle"}, "reward_pose"),
-    ({"reward_type": "sparse", "reward_pose": "truth"}, "reward_pose"),
-    ({"reward_type": "staged", "success_payoff": "at_once"}, "success_payoff"),
-    ({"reward_type": "dense", "success_payoff": "fixed"}, "success_payoff"),  # no success bonus
+    ({"reward_type": "shaped"}, "RewardConfig.kind"),
+    ({"reward_type": {"kind": "staged", "horizon": 0}}, "RewardConfig.horizon"),
+    ({"controller": {"substeps": 0}}, "ControllerConfig.substeps"),
+    ({"controller": {"posture_target": "truth"}}, "ControllerConfig.posture_target"),
+    ({"controller": "fast"}, "controller must be a record ControllerConfig"),
+    ({"start": {"share": 1.5}}, "PregraspStart.share"),
 ]
 
 
@@ -295,32 +238,42 @@ def test_env_refuses_arguments_it_would_ignore_or_misread(kwargs, field):
 
 
 def test_gym_make_refuses_a_pose_error_the_oracle_would_ignore():
-    with pytest.raises(ValueError, match=r"apply to pose_source='noisy' only; with pose_source='oracle' "
-                                         r"they would be ignored \(got pose_error_deg=10"):
+    with pytest.raises(ValueError, match=r"applies to pose_source='noisy' only; with pose_source='oracle' "
+                                         r"it would be ignored \(got pose_error_deg=10"):
         gym.make("SMS3DPick-v0", pose_source="oracle", pose_error_deg=10)
 
 
 _NON_FINITE_OR_NEGATIVE = st.one_of(st.floats(allow_nan=True, allow_infinity=True).filter(
     lambda v: not (math.isfinite(v) and v >= 0)), st.booleans(), st.text(max_size=3))
+#: A number each argument refuses when it is not finite and >= 0: how to pass it, and the name
+#: its error gives.
+_NUMBERS = {
+    "pose_error_deg": (lambda v: {"pose_source": "noisy", "pose_error_deg": v}, "pose_error_deg"),
+    "max_tilt_deg": (lambda v: {"target": {"max_tilt_deg": v}}, "TargetRule.max_tilt_deg"),
+    "free_radius": (lambda v: {"scene": {"free_radius": v}}, "SceneSourceConfig.free_radius"),
+    "control_dt": (lambda v: {"controller": {"control_dt": v}}, "ControllerConfig.control_dt"),
+    "share": (lambda v: {"start": {"share": v}}, "PregraspStart.share"),
+}
 
 
 @settings(max_examples=60, deadline=None)
-@given(field=st.sampled_from(["pose_error_deg", "position_noise", "max_tilt_deg", "free_radius"]),
-       value=_NON_FINITE_OR_NEGATIVE)
+@given(field=st.sampled_from(sorted(_NUMBERS)), value=_NON_FINITE_OR_NEGATIVE)
 def test_env_numeric_arguments_property(field, value):
-    kwargs = {"pose_source": "noisy", field: value}
-    with pytest.raises((ValueError, TypeError), match=field):
-        sms3d_env.SMS3DPickEnv(**kwargs)
+    kwargs, name = _NUMBERS[field]
+    with pytest.raises((ValueError, TypeError), match=name):
+        sms3d_env.SMS3DPickEnv(**kwargs(value))
 
 
 @settings(max_examples=40, deadline=None)
-@given(size=st.one_of(st.tuples(st.integers(-5, 0), st.integers(-5, 64)),
+@given(record=st.sampled_from(["image_obs", "render_camera"]),
+       size=st.one_of(st.tuples(st.integers(-5, 0), st.integers(-5, 64)),
                       st.tuples(st.floats(1, 64), st.floats(1, 64)),
                       st.lists(st.integers(1, 64), min_size=0, max_size=1).map(tuple),
                       st.lists(st.integers(1, 64), min_size=3, max_size=4).map(tuple)))
-def test_env_image_size_property(size):
-    with pytest.raises(ValueError, match="image_size"):
-        sms3d_env.SMS3DPickEnv(image_size=size)
+def test_env_image_size_property(record, size):
+    name = {"image_obs": "ImageObservation", "render_camera": "RenderCamera"}[record]
+    with pytest.raises(ValueError, match=f"{name}.size"):
+        sms3d_env.SMS3DPickEnv(**{record: {"size": size}})
 
 
 @settings(max_examples=40, deadline=None)
@@ -334,7 +287,7 @@ def test_env_flags_take_bools_only(field, value):
 
 
 def test_env_flags_take_numpy_bools():
-    env = sms3d_env.SMS3DPickEnv(scene_config=SMALL, end_on_dead_end=np.bool_(True), task_obs=np.False_)
+    env = sms3d_env.SMS3DPickEnv(scene=SMALL, end_on_dead_end=np.bool_(True), task_obs=np.False_)
     assert env.end_on_dead_end is True and env.task_obs is False
 
 
@@ -342,9 +295,9 @@ def test_a_zero_residual_is_the_scripted_picker_exactly():
     from sms3d_env.pickers import run_episode
     from sms3d_env.training.residual import ResidualPicker
 
-    plain = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    plain = gym.make("SMS3DPickTrain-v0", scene=SMALL)
     expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
-    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), scale=0.5)
+    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene=SMALL), scale=0.5)
     obs, _ = env.reset(seed=2)
     assert env.observation_space.contains(obs)
     done, steps = False, 0
@@ -364,12 +317,12 @@ def test_a_residual_until_held_leaves_the_twist_and_lift_to_the_scripted_picker(
     from sms3d_env.pickers import run_episode
     from sms3d_env.training.residual import ResidualPicker
 
-    plain = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    plain = gym.make("SMS3DPickTrain-v0", scene=SMALL)
     expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
     assert expected["success"]
     outcomes = {}
     for until_held, push_when_held in ((True, True), (False, True), (True, False)):
-        env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), scale=1.0, until_held=until_held)
+        env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene=SMALL), scale=1.0, until_held=until_held)
         obs, _ = env.reset(seed=2)
         done, steps = False, 0
         while not done:
@@ -401,7 +354,7 @@ class _RecordCommands(gym.Wrapper):
 def test_an_approach_only_residual_leaves_the_descent_on_to_the_scripted_picker():
     from sms3d_env.training.residual import ResidualPicker
 
-    recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene_config=SMALL))
+    recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene=SMALL))
     env = ResidualPicker(recorder, scale=0.5, approach_only=True)
     obs, _ = env.reset(seed=2)
     # A push for the first 10 steps, none until the scripted picker has reached its stand-off
@@ -432,7 +385,7 @@ def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
     )
 
     def run(trigger_value):
-        recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene_config=SMALL))
+        recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene=SMALL))
         env = ResidualPicker(recorder, scale=0.5, approach_only=True, descend_trigger=True)
         assert env.action_space.shape == (8,)
         obs, _ = env.reset(seed=2)
@@ -456,7 +409,7 @@ def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
     assert near and phase == "approach" and not any(n for n, _, _ in fired[:i] if n)  # the first step within reach
     assert fired[i + 1][1] == "descend"
     with pytest.raises(ValueError, match="action of shape"):
-        env_for_shape = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=True)
+        env_for_shape = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene=SMALL), descend_trigger=True)
         env_for_shape.reset(seed=2)
         env_for_shape.step(np.zeros(7, np.float32))
     # The scripted approach needs 3 mm to descend; within DESCEND_TRIGGER_RADIUS_M the trigger
@@ -465,7 +418,7 @@ def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
     assert i + 1 < scripted_approach
     np.testing.assert_allclose(fired_commands[:i + 1], below_commands[:i + 1], atol=1e-6)
     with pytest.raises(ValueError, match="descend_trigger"):
-        ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=1)
+        ResidualPicker(gym.make("SMS3DPickTrain-v0", scene=SMALL), descend_trigger=1)
 
 
 def test_a_trigger_only_residual_sends_the_scripted_commands_and_fires_the_descent():
@@ -475,11 +428,11 @@ def test_a_trigger_only_residual_sends_the_scripted_commands_and_fires_the_desce
     from sms3d_env.pickers import run_episode
     from sms3d_env.training.residual import DESCEND_TRIGGER, ResidualPicker
 
-    plain = gym.make("SMS3DPickTrain-v0", scene_config=SMALL)
+    plain = gym.make("SMS3DPickTrain-v0", scene=SMALL)
     expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
 
     def run(trigger_value, trigger_only):
-        recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene_config=SMALL))
+        recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene=SMALL))
         env = ResidualPicker(recorder, scale=0.5, descend_trigger=True, trigger_only=trigger_only)
         obs, _ = env.reset(seed=2)
         action = np.zeros(env.action_space.shape, np.float32)
@@ -500,7 +453,7 @@ def test_a_trigger_only_residual_sends_the_scripted_commands_and_fires_the_desce
     _, full_commands, full_fired, _ = run(1.0, trigger_only=False)
     assert sum(only_fired) == 1 and only_fired == full_fired
     np.testing.assert_allclose(only_commands, full_commands, atol=1e-6)  # an 8-entry zero residual
-    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=True, trigger_only=True)
+    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene=SMALL), descend_trigger=True, trigger_only=True)
     assert env.action_space.shape == (1,)
     with pytest.raises(ValueError, match="descend_trigger=True"):
         ResidualPicker(plain, trigger_only=True)
@@ -513,8 +466,8 @@ def test_a_trigger_only_residual_sends_the_scripted_commands_and_fires_the_desce
 def test_the_descend_trigger_observes_the_stand_off_gap_and_the_tool_motion_over_its_window():
     from sms3d_env.training.residual import MOTION_WINDOW_STEPS, ResidualPicker
 
-    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL), descend_trigger=True)
-    assert "approach_motion" not in ResidualPicker(gym.make("SMS3DPickTrain-v0", scene_config=SMALL)).observation_space.spaces
+    env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene=SMALL), descend_trigger=True)
+    assert "approach_motion" not in ResidualPicker(gym.make("SMS3DPickTrain-v0", scene=SMALL)).observation_space.spaces
     obs, _ = env.reset(seed=2)
     positions = []
     for _ in range(40):
@@ -547,7 +500,7 @@ def test_uniform_noisy_pose_errs_within_its_range():
 def test_scene_pool_reuses_beds_and_replays_episodes_exactly():
     from sms3d_env.pickers import run_episode
 
-    env = gym.make("SMS3DPickTrain-v0", scene_config=SMALL, scene_pool=1, pool_seed=7)
+    env = gym.make("SMS3DPickTrain-v0", scene=SceneSourceConfig(config=SMALL, pool=1, pool_seed=7))
     picker = ScriptedPicker.for_env(env)
     first = run_episode(env, picker, seed=4)
     assert env.unwrapped.scene is env.unwrapped.scene_source.pool[0]
@@ -556,8 +509,6 @@ def test_scene_pool_reuses_beds_and_replays_episodes_exactly():
     # The pool's compiled model is copied per episode: a replay is the same episode.
     again = run_episode(env, picker, seed=4)
     assert (again["success"], again["steps"], again["return"]) == (first["success"], first["steps"], first["return"])
-    with pytest.raises(ValueError, match="scene_pool"):
-        sms3d_env.SMS3DPickEnv(scene_pool=-1)
 
 
 def test_a_scene_pool_keeps_a_bounded_number_of_compiled_models(monkeypatch):
@@ -566,7 +517,7 @@ def test_a_scene_pool_keeps_a_bounded_number_of_compiled_models(monkeypatch):
     from sms3d_env import scene_source
 
     monkeypatch.setattr(scene_source, "MAX_CACHED_MODELS", 2)
-    env = gym.make("SMS3DPick-v0", scene_config=SMALL, scene_pool=5).unwrapped
+    env = gym.make("SMS3DPick-v0", scene={"config": SMALL, "pool": 5}).unwrapped
     seeds = range(8)
 
     def draws():

@@ -27,7 +27,7 @@ def _can_touch(model, a: int, b: int) -> bool:
 
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_every_robot_body_can_touch_the_soil_and_every_mushroom(robot):
-    env = gym.make("SMS3DPick-v1", robot=robot, scene_config=SMALL)
+    env = gym.make("SMS3DPick-v1", robot=robot, scene=SMALL)
     env.reset(seed=3)
     u = env.unwrapped
     m, w = u.model, u.world
@@ -45,7 +45,7 @@ def test_every_robot_body_can_touch_the_soil_and_every_mushroom(robot):
 def test_the_jaco_of_v0_still_has_its_ghost_links():
     # The comparison the version history states: v0's base, shoulder, upper arm, forearm and
     # first wrist link collide with nothing.
-    env = gym.make("SMS3DPick-v0", scene_config=SMALL)
+    env = gym.make("SMS3DPick-v0", scene=SMALL)
     env.reset(seed=3)
     m, w = env.unwrapped.model, env.unwrapped.world
     ghosts = {m.body(int(m.geom_bodyid[g])).name for g in np.nonzero(w.robot_geom)[0]
@@ -55,7 +55,7 @@ def test_the_jaco_of_v0_still_has_its_ghost_links():
 
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_the_exact_pose_scripted_picker_picks_with_every_link_colliding(robot):
-    env = gym.make("SMS3DPick-v1", robot=robot, scene_config=SMALL)
+    env = gym.make("SMS3DPick-v1", robot=robot, scene=SMALL)
     results = [run_episode(env, ScriptedPicker(), seed) for seed in range(1_000_000, 1_000_004)]
     assert sum(r["success"] for r in results) >= 3, results
     assert all(r["failure_cause"] != "not_reached" for r in results)
@@ -66,14 +66,14 @@ def test_the_exact_pose_scripted_picker_picks_with_every_link_colliding(robot):
 def test_gymnasium_and_sb3_check_env_pass(env_id, robot):
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    env = gym.make(env_id, robot=robot, scene_config=SMALL).unwrapped
+    env = gym.make(env_id, robot=robot, scene=SMALL).unwrapped
     check_env(env, skip_render_check=True)
     sb3_check_env(env, warn=False)
 
 
 def test_v0_is_deprecated_in_favour_of_v1():
     with pytest.warns(DeprecationWarning, match="out of date"):
-        gym.make("SMS3DPick-v0", scene_config=SMALL)
+        gym.make("SMS3DPick-v0", scene=SMALL)
 
 
 @pytest.mark.parametrize("bad", ["ur5", "", 3, None.__class__])
@@ -90,8 +90,8 @@ def test_the_gantry_is_deterministic_by_seed_and_pickles_mid_episode():
             obs, *_ = env.step(picker(obs))
         return obs, picker
 
-    a = gym.make("SMS3DPick-v1", scene_config=SMALL)
-    b = gym.make("SMS3DPick-v1", scene_config=SMALL)
+    a = gym.make("SMS3DPick-v1", scene=SMALL)
+    b = gym.make("SMS3DPick-v1", scene=SMALL)
     obs_a, picker = rollout(a, 30)
     obs_b, _ = rollout(b, 30)
     for key in obs_a:
@@ -105,7 +105,7 @@ def test_the_gantry_is_deterministic_by_seed_and_pickles_mid_episode():
 
 
 def test_an_approach_that_stops_short_is_not_reached_and_time_counts():
-    env = gym.make("SMS3DPick-v1", scene_config=SMALL)
+    env = gym.make("SMS3DPick-v1", scene=SMALL)
     env.reset(seed=5)
     for _ in range(10):
         _, _, terminated, truncated, info = env.step(np.zeros(7, np.float32))
@@ -117,7 +117,7 @@ def test_async_vector_envs_are_seeded_and_close_their_workers():
     import multiprocessing
 
     def first_observations():
-        envs = gym.make_vec("SMS3DPick-v1", num_envs=4, vectorization_mode="async", scene_config=SMALL)
+        envs = gym.make_vec("SMS3DPick-v1", num_envs=4, vectorization_mode="async", scene=SMALL)
         try:
             obs, _ = envs.reset(seed=[1, 2, 3, 4])
             envs.step(np.zeros((4, 7), np.float32))
@@ -135,7 +135,7 @@ def test_async_vector_envs_are_seeded_and_close_their_workers():
 def test_the_gantry_pressing_into_the_soil_at_full_speed_stays_below_the_bruising_force():
     corner = SceneConfig().replace(placement__num_mushrooms=1, placement__x_range=(0.15, 0.18),
                                    placement__y_range=(0.15, 0.18))
-    env = gym.make("SMS3DPick-v1", scene_config=corner)
+    env = gym.make("SMS3DPick-v1", scene=corner)
     env.reset(seed=0)
     u = env.unwrapped
     lift = u.model.actuator("gantry/act_lift_z").id
@@ -158,7 +158,7 @@ def test_v1_refuses_the_jaco_whose_links_collide_with_nothing():
 
 def test_one_compiled_model_serves_every_target_of_a_pool_bed():
     # With every mushroom free the world does not depend on the target: a pool bed compiles once.
-    env = gym.make("SMS3DPick-v1", scene_config=SMALL, scene_pool=1)
+    env = gym.make("SMS3DPick-v1", scene={"config": SMALL, "pool": 1})
     targets = {env.reset(seed=s, options={"target": k})[1]["target"] for s, k in enumerate(range(4))}
     assert targets == {0, 1, 2, 3}
     assert len(env.unwrapped.scene_source.models) == 1

@@ -65,7 +65,7 @@ def test_env_grip_wrench_is_about_the_cup_contact():
     import sms3d_env  # noqa: F401
 
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=4)
-    env = gym.make("SMS3DPick-v0", scene_config=cfg).unwrapped
+    env = gym.make("SMS3DPick-v0", scene=cfg).unwrapped
     env.reset(seed=0)
     m, d = env.model, env.data
     k = env.picking.state.target

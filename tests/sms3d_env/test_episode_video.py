@@ -71,8 +71,8 @@ def _segmentation(env, camera="pick", size=(120, 160)):
 @pytest.mark.parametrize("robot", ["gantry", "jaco"])
 def test_the_pick_camera_sees_the_target_and_the_cup_as_the_descent_starts(robot):
     # The overhead camera, render()'s old default, looked down through the arm.
-    env = gym.make("SMS3DPick-v1", robot=robot, scene_config=SceneConfig().replace(placement__num_mushrooms=25),
-                   render_mode="rgb_array", render_size=(120, 160))
+    env = gym.make("SMS3DPick-v1", robot=robot, scene=SceneConfig().replace(placement__num_mushrooms=25),
+                   render_mode="rgb_array", render_camera={"size": (120, 160)})
     picker = ScriptedPicker.for_env(env)
     obs, info = env.reset(seed=0)
     picker.reset()
@@ -94,16 +94,17 @@ def test_the_pick_camera_sees_the_target_and_the_cup_as_the_descent_starts(robot
 
 def test_image_observations_keep_the_overhead_camera_and_bad_cameras_are_named():
     # The pick camera is aimed with the true pose: image observations must not see through it.
-    kw = {"scene_config": SceneConfig().replace(placement__num_mushrooms=4), "render_mode": "depth_array",
-          "render_size": (48, 64)}
-    default = gym.make("SMS3DPick-v1", image_obs=True, image_size=(48, 64), **kw)
-    overhead = gym.make("SMS3DPick-v1", camera="overhead", **kw)
+    kw = {"scene": SceneConfig().replace(placement__num_mushrooms=4), "render_mode": "depth_array"}
+    default = gym.make("SMS3DPick-v1", image_obs={"size": (48, 64)}, render_camera={"size": (48, 64)}, **kw)
+    overhead = gym.make("SMS3DPick-v1", render_camera={"name": "overhead", "size": (48, 64)}, **kw)
     obs, _ = default.reset(seed=0)
     overhead.reset(seed=0)
-    assert default.unwrapped.render_camera == "pick"
+    assert default.unwrapped.render_camera.name == "pick"
     np.testing.assert_array_equal(obs["depth"][..., 0], overhead.render())
     assert not np.array_equal(default.render(), overhead.render())
     default.close()
     overhead.close()
-    with pytest.raises(ValueError, match="camera must be None or one of .*'pick'.*got 'top'"):
-        gym.make("SMS3DPick-v1", camera="top")
+    with pytest.raises(ValueError, match="RenderCamera.name must be one of .*'pick'.*got 'top'"):
+        gym.make("SMS3DPick-v1", render_camera="top")
+    with pytest.raises(ValueError, match="ImageObservation.camera must be one of .*'pick'.*got 'top'"):
+        gym.make("SMS3DPick-v1", image_obs={"camera": "top"})

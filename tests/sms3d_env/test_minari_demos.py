@@ -119,7 +119,7 @@ def test_dart_noise_and_a_drawn_pose_error_are_recorded(minari_root):
     assert not np.allclose(episode.actions[:, :6], labels[:, :6])
     np.testing.assert_array_equal(episode.actions[:, 6], labels[:, 6])
     recording = dataset.storage.metadata["recording"]
-    assert (recording["pose_source"], recording["pose_error_range_deg"], recording["action_noise"]) == \
+    assert (recording["pose_source"], recording["pose_error_deg"], recording["action_noise"]) == \
         ("noisy", [5.0, 20.0], 0.3)
     env = dataset.recover_environment()
     try:
@@ -164,13 +164,14 @@ def test_bc_refuses_demos_of_another_env_before_writing(minari_root, tmp_path):
 
 
 def test_the_env_takes_its_json_forms_and_refuses_bad_ones_by_name():
-    """What makes a dataset's env spec rebuildable: the bed as ``scene_config``'s mapping gives the
-    same beds as the ``SceneConfig``, a drawn pose error is ``pose_error_range_deg``."""
+    """What makes a dataset's env spec rebuildable: the bed as the ``SceneConfig``'s mapping gives
+    the same beds as the ``SceneConfig``, every record argument has a mapping form, a drawn pose
+    error is a ``pose_error_deg`` pair."""
     import generator
     from generator.errors import ConfigError
 
-    as_object = gym.make("SMS3DPickTrain-v1", scene_config=generator.SceneConfig().replace(placement__num_mushrooms=BED))
-    as_mapping = gym.make("SMS3DPickTrain-v1", scene_config={"placement": {"num_mushrooms": BED}})
+    as_object = gym.make("SMS3DPickTrain-v1", scene=generator.SceneConfig().replace(placement__num_mushrooms=BED))
+    as_mapping = gym.make("SMS3DPickTrain-v1", scene={"placement": {"num_mushrooms": BED}})
     try:
         for env in (as_object, as_mapping):
             env.reset(seed=4)
@@ -183,11 +184,40 @@ def test_the_env_takes_its_json_forms_and_refuses_bad_ones_by_name():
         as_object.close()
         as_mapping.close()
     with pytest.raises(ConfigError, match="num_mushroomz"):
-        gym.make("SMS3DPickTrain-v1", scene_config={"placement": {"num_mushroomz": 3}})
-    with pytest.raises(TypeError, match="scene_config"):
-        gym.make("SMS3DPickTrain-v1", scene_config=3)
-    for bad in ({"pose_error_range_deg": (0, 30)},  # needs the noisy source
-                {"pose_source": "noisy", "pose_error_range_deg": (30, 10)},
-                {"pose_source": "noisy", "pose_error_deg": 5.0, "pose_error_range_deg": (0, 30)}):
-        with pytest.raises(ValueError, match="pose_error_range_deg"):
+        gym.make("SMS3DPickTrain-v1", scene={"placement": {"num_mushroomz": 3}})
+    with pytest.raises(TypeError, match="scene must be"):
+        gym.make("SMS3DPickTrain-v1", scene=3)
+    for bad in ({"pose_error_deg": (0, 30)},  # needs the noisy source
+                {"pose_source": "noisy", "pose_error_deg": (30, 10)},
+                {"pose_source": "noisy", "pose_error_deg": (0, 30, 60)}):
+        with pytest.raises(ValueError, match="pose_error_deg"):
             gym.make("SMS3DPickTrain-v1", **bad)
+
+
+def test_every_record_argument_has_a_json_form_that_rebuilds_the_same_env():
+    from sms3d_env.cameras import ImageObservation, RenderCamera
+    from sms3d_env.controller import ControllerConfig
+    from sms3d_env.rewards import RewardConfig
+    from sms3d_env.scene_source import SceneSourceConfig
+    from sms3d_env.start_states import PregraspStart
+    from sms3d_env.targets import TargetRule
+
+    records = {"scene": SceneSourceConfig(config={"placement": {"num_mushrooms": BED}}, pool=2, pool_seed=3),
+               "target": TargetRule("random", max_tilt_deg=30.0), "reward_type": RewardConfig("staged", 200),
+               "controller": ControllerConfig(substeps=10, posture_target="tool"), "start": PregraspStart(0.5),
+               "image_obs": ImageObservation((16, 24)), "render_camera": RenderCamera("side", (32, 48))}
+    forms = {"scene": {"config": {"placement": {"num_mushrooms": BED}}, "pool": 2, "pool_seed": 3},
+             "target": {"rule": "random", "max_tilt_deg": 30.0}, "reward_type": {"kind": "staged", "horizon": 200},
+             "controller": {"substeps": 10, "posture_target": "tool"}, "start": {"share": 0.5},
+             "image_obs": {"size": [16, 24]}, "render_camera": {"name": "side", "size": [32, 48]}}
+    env = gym.make("SMS3DPickTrain-v1", **forms)
+    rebuilt = gym.make(gym.envs.registration.EnvSpec.from_json(env.spec.to_json()))
+    try:
+        for made in (env, rebuilt):
+            u = made.unwrapped
+            assert (u.scene_source.config, u.target_rule, u.reward_config, u.ctrl_cfg, u.start, u.image_obs,
+                    u.render_camera.size) == (records["scene"], records["target"], records["reward_type"],
+                                              records["controller"], records["start"], records["image_obs"], (32, 48))
+    finally:
+        env.close()
+        rebuilt.close()

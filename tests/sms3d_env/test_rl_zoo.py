@@ -35,7 +35,7 @@ def zoo_run(tmp_path_factory):
     """``(run folder, stdout)`` of ``python -m rl_zoo3.train`` on the shipped recipe for 512 steps
     (one env, rollouts of 256, an 8-mushroom bed pool of 2)."""
     logs = tmp_path_factory.mktemp("zoo")
-    env_kwargs = f"dict(scene_config=dict(placement=dict(num_mushrooms={BED})), scene_pool=2, pregrasp_start=0.75)"
+    env_kwargs = f"dict(scene=dict(config=dict(placement=dict(num_mushrooms={BED})), pool=2), start=dict(share=0.75))"
     cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", ENV_ID, "--gym-packages", "sms3d_env",
            "--conf-file", str(recipe_path("ppo")), "--n-timesteps", "512", "--eval-freq", "-1", "--seed", "0",
            "--log-folder", str(logs), "--hyperparams", "n_envs:1", "n_steps:256", "batch_size:64",
@@ -61,7 +61,7 @@ def test_policy_actor_runs_a_zoo_model(zoo_run):
     actor = PolicyActor(run / f"{ENV_ID}.zip")
     assert (actor.env_id, actor.saved["algo"], actor.saved["num_mushrooms"]) == (ENV_ID, "ppo", BED)
     assert actor.env_options == {}  # the curriculum and the bed pool are training options
-    env = actor.make_env(scene_config={"placement": {"num_mushrooms": BED}})
+    env = actor.make_env(scene={"placement": {"num_mushrooms": BED}})
     try:
         obs, _ = env.reset(seed=3)
         action = actor(obs)
@@ -124,13 +124,26 @@ def test_train_policy_reads_the_recipe_into_the_same_settings():
     assert cfg.max_wall_s == 7000 and cfg.target_kl == 0.02 and cfg.log_std_init == -1.0
 
 
+def test_a_recipe_with_the_env_arguments_of_earlier_versions_reads_the_same(tmp_path):
+    shipped = recipe_path("ppo").read_text()
+    earlier = shipped.replace("scene: {config: {placement: {num_mushrooms: 10}}, pool: 500}",
+                              "scene_config: {placement: {num_mushrooms: 10}}\n    scene_pool: 500")
+    earlier = earlier.replace("start: {share: 0.75}", "pregrasp_start: 0.75")
+    assert earlier.count("scene_pool") == 1 and earlier.count("pregrasp_start") == 1
+    path = tmp_path / "earlier.yml"
+    path.write_text(earlier)
+    assert with_recipe(TrainConfig(), path) == with_recipe(TrainConfig(), "ppo")
+
+
 @pytest.mark.parametrize("entry, named", [
     ("  learning_rate: lin_3e-4\n", "learning_rate"),
     ("  policy_kwargs: \"dict(net_arch=[64])\"\n", "policy_kwargs"),
     ("  frame_stack: 4\n", "frame_stack"),
-    ("  env_kwargs: {scenes: /data}\n", "scenes"),
+    ("  env_kwargs: {scene: /data}\n", "env_kwargs.scene"),
+    ("  env_kwargs: {scene: {config: {placement: {num_mushrooms: 8}}, pool_seed: 3}}\n", "pool_seed"),
+    ("  env_kwargs: {controller: {substeps: 10}}\n", "env_kwargs.controller"),
     ("  callback: [stable_baselines3.common.callbacks.CheckpointCallback]\n", "CheckpointCallback"),
-    ("  env_kwargs: {pregrasp_start: 0.5}\n  callback:\n"
+    ("  env_kwargs: {start: {share: 0.5}}\n  callback:\n"
      "    - sms3d_env.training.curriculum.pregrasp_annealing: {initial: 0.75}\n", "initial"),
 ])
 def test_recipe_keys_without_a_setting_are_refused_by_name(tmp_path, entry, named):

@@ -21,7 +21,7 @@ SCRIPT = textwrap.dedent("""
     from generator import SceneConfig
 
     def make():
-        return gym.make("SMS3DPick-v1", scene_config=SceneConfig().replace(placement__num_mushrooms=4),
+        return gym.make("SMS3DPick-v1", scene=SceneConfig().replace(placement__num_mushrooms=4),
                         render_mode="human")
 
     env = make()

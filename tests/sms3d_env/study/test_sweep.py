@@ -238,12 +238,29 @@ def test_sweep_compare_keeps_two_sweeps_of_one_picker(tmp_path, capsys):
     are two curves, the second named by its folder, not one silently replaced."""
     cfg = SweepConfig(errors_deg=(0.0,), episodes=1, num_mushrooms=8)
     run_sweep(cfg, tmp_path / "default", progress=False)
-    run_sweep(dataclasses.replace(cfg, env_kwargs={"posture_target": "tool"}), tmp_path / "tool", progress=False)
+    tool = {"controller": {"posture_target": "tool"}}
+    run_sweep(dataclasses.replace(cfg, env_kwargs=tool), tmp_path / "tool", progress=False)
     assert main(["sweep-compare", str(tmp_path / "default"), str(tmp_path / "tool"),
                  "--out", str(tmp_path / "cmp.png")]) == 0
     table = capsys.readouterr().out
     assert "| scripted picker | 0° |" in table and "| scripted picker (tool) | 0° |" in table
     assert (tmp_path / "cmp.png").stat().st_size > 0
+
+
+def test_a_sweep_of_an_earlier_version_resumes_with_its_env_options_read_as_now(tmp_path):
+    """A folder whose settings name the env options as the constructor took them before its
+    arguments were regrouped (``posture_target``) resumes under the same options given now
+    (``controller``), without running a part again; other options are still refused."""
+    cfg = SweepConfig(errors_deg=(0.0,), episodes=1, num_mushrooms=8,
+                      env_kwargs={"controller": {"posture_target": "tool"}})
+    rows = run_sweep(cfg, tmp_path, progress=False)
+    settings = tmp_path / "sweep_config.json"
+    settings.write_text(json.dumps({**json.loads(settings.read_text()), "env_kwargs": {"posture_target": "tool"}}))
+    made = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "parts").glob("*.json")}
+    assert run_sweep(cfg, tmp_path, progress=False) == rows
+    assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "parts").glob("*.json")} == made
+    with pytest.raises(ValueError, match="env_kwargs"):
+        run_sweep(dataclasses.replace(cfg, env_kwargs={}), tmp_path, progress=False)
 
 
 def test_a_killed_sweep_leaves_no_worker(tmp_path, processes):

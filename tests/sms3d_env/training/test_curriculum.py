@@ -66,4 +66,4 @@ def test_annealing_needs_a_curriculum_share():
         TrainConfig(pregrasp_anneal=True)
     with pytest.raises(ValueError, match="TrainConfig.pregrasp_anneal"):
         TrainConfig(pregrasp_start=0.5, pregrasp_anneal=1)  # type: ignore[arg-type]
-    assert TrainConfig(pregrasp_start=0.5, pregrasp_anneal=True).env_kwargs()["pregrasp_start"] == 0.5
+    assert TrainConfig(pregrasp_start=0.5, pregrasp_anneal=True).env_kwargs()["start"].share == 0.5

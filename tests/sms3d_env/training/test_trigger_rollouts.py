@@ -112,7 +112,7 @@ def test_a_trained_trigger_runs_as_the_studys_residual_picker(tmp_path):
     saved = json.loads((tmp_path / "config.json").read_text())
     assert saved["residual_trigger_only"] and saved["recipe"] == "trigger-rollouts"
     env, picker = make_picker_env(parse_picker(f"residual:{tmp_path / 'model.zip'}"),
-                                  scene_config=SceneConfig().replace(placement__num_mushrooms=8),
+                                  scene=SceneConfig().replace(placement__num_mushrooms=8),
                                   pose_source=NoisyPose(30.0))
     try:
         assert env.action_space.shape == (1,)
