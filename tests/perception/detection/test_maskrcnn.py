@@ -108,7 +108,7 @@ def test_coco_evaluation_scores_the_oracle_perfectly(beds):
         assert scores.ap > 0.95
 
 
-@pytest.mark.slow  # about 200 s on 2 cores; the resume and ResNet-50 tests below train in the default suite
+@pytest.mark.slow  # about 200 s on 2 cores; the resume test below trains in the default suite
 def test_short_training_overfits_a_few_scenes(beds, tmp_path):
     # From random weights, 120 iterations with the cosine schedule give mask AP50 ≈ 0.59 on these
     # two images (at a constant rate the scores swung between 0.05 and 0.26 from epoch to epoch).
@@ -132,6 +132,7 @@ def test_training_resumes_from_its_last_epoch(beds, tmp_path):
         train_detector(beds, tmp_path, DetectorConfig(arch="resnet50_fpn_v2", min_size=192, max_size=256), train, progress=False)
 
 
+@pytest.mark.slow  # a ResNet-50 Mask R-CNN step takes ~18 s on 2 cores; the default suite trains the small one
 def test_the_papers_resnet50_configuration_trains_from_scratch(beds, tmp_path):
     config = DetectorConfig(arch="resnet50_fpn_v2", min_size=192, max_size=256)
     log = train_detector(beds, tmp_path, config, DetectorTrainConfig(epochs=1, max_images=1, batch_size=1), progress=False)

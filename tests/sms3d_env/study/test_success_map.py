@@ -98,6 +98,7 @@ class _no_raise:
         return False
 
 
+@pytest.mark.slow  # starting a Ray cluster takes ~50 s on 2 cores
 def test_process_pool_and_ray_give_the_same_rows(tmp_path):
     pytest.importorskip("ray")
     config = SweepConfig(errors_deg=(0.0, 20.0), position_errors_mm=(0.0, 8.0), episodes=1, chunk=1,

@@ -279,6 +279,7 @@ def test_a_killed_sweep_leaves_no_worker(tmp_path, processes):
     assert processes.survivors(workers) == []
 
 
+@pytest.mark.slow  # starting a Ray cluster; the process-pool kill test stays in the default suite
 def test_a_killed_ray_sweep_leaves_no_ray_process(tmp_path, processes):
     """``kill -9`` of a sweep on Ray ends every process of its cluster at once: the raylet's agents
     used to wait 60-105 s on the dead GCS server, and a running task kept writing parts."""
