@@ -21,11 +21,16 @@ import generator  # noqa: E402
 import sms3d_env  # noqa: E402, F401
 
 
-def measure(env_id: str, steps: int, image_obs: bool, n: int) -> tuple[float, float]:
+def measure(env_id: str, steps: int, image_obs: bool, n: int, pool: int = 0) -> tuple[float, float]:
+    """Steps/s with random actions (the time limit's resets included) and the mean time of the
+    warm-up resets; ``pool`` > 0 draws beds from a pool of that many, each generated once in the
+    warm-up (as a training run's envs do)."""
+    from sms3d_env.scene_source import SceneSourceConfig
+
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
-    env = gym.make(env_id, scene=cfg, image_obs=image_obs)  # with its time limit
+    env = gym.make(env_id, scene=SceneSourceConfig(config=cfg, pool=pool), image_obs=image_obs)  # with its time limit
     t = time.perf_counter()
-    resets = 3
+    resets = max(3, pool)
     for s in range(resets):
         env.reset(seed=s)
     reset_s = (time.perf_counter() - t) / resets
@@ -52,6 +57,8 @@ def main() -> None:
     rows = []
     rate, reset_s = measure(env_id, args.steps, False, args.mushrooms)
     rows.append(("state obs", rate, reset_s))
+    rate_p, reset_p = measure(env_id, args.steps, False, args.mushrooms, pool=8)
+    rows.append(("state obs, 8-bed pool", rate_p, reset_p))
     rate_i, reset_i = measure(env_id, max(50, args.steps // 5), True, args.mushrooms)
     rows.append(("state + 64x64 RGB-D", rate_i, reset_i))
     print(f"{env_id}, {args.mushrooms} mushrooms, 40 ms/step (20 x 2 ms), random actions, resets included")
