@@ -138,14 +138,15 @@ def test_the_shipped_triggers_saved_options_translate_to_the_controller():
     saved = json.loads((SHIPPED_TRIGGER.parent / "config.json").read_text())["env_options"]
     assert saved["posture_target"] == "tool"  # the earlier form, as the file was written
     assert translate_legacy_options(saved) == {"reward_type": "staged", "suction_mode": "latched",
-                                               "end_on_dead_end": True, "task_obs": True,
+                                               "end_on_dead_end": True, "task_obs": True, "robot": "jaco",
                                                "controller": {"posture_target": "tool"}}
     actor = PolicyActor(SHIPPED_TRIGGER)
     assert actor.env_options["controller"] == {"posture_target": "tool"}
     env = actor.make_env(scene=SMALL)
     try:
         assert env.unwrapped.ctrl_cfg.posture_target == "tool"
-        assert env.unwrapped.scene_source.config.free_radius == V0_FREE_RADIUS  # it acts on SMS3DPickTrain-v0
+        # It acts on SMS3DPickTrain-v1's Jaco: every mushroom free.
+        assert env.unwrapped.robot_cfg.name == "jaco" and env.unwrapped.scene_source.config.free_radius is None
     finally:
         env.close()
 
