@@ -110,6 +110,7 @@ def test_process_pool_and_ray_give_the_same_rows(tmp_path):
     assert {r["cap_top_error_mm"] for r in pool} == {0.0, 8.0}
 
 
+@pytest.mark.slow  # ~26 s on 2 cores; test_small_sweep_resumes_and_reports covers resuming from lost parts
 def test_a_sweep_killed_with_sigkill_resumes_to_the_same_csv(tmp_path):
     import os
     import signal
