@@ -143,7 +143,8 @@ class SMS3DPickEnv(gym.Env):
 
     ## Version history
     - v1: the robot is physically honest. A Cartesian gantry harvester (``robot="gantry"``, the
-      default) or a Jaco hanging above the bed (``robot="jaco"``), every link of either
+      default) or a Jaco hanging above the bed with a right-angle suction adapter
+      (``robot="jaco"``), every link of either
       colliding with the soil and with every mushroom; every mushroom is free and rooted
       (``SceneSourceConfig.free_radius=None``), so any link that touches a cap is judged by the
       same bruise and disturbed-neighbour rules as the tool. ``info`` gains ``time_s``; the
