@@ -38,7 +38,7 @@ def run_cell(robot: str, error_deg: float, episodes: int) -> dict:
         result = run_episode(env, picker, seed)
         causes["success" if result["success"] else result["failure_cause"]] += 1
         if result["success"]:
-            times.append(result["steps"] * env.unwrapped.control_dt)
+            times.append(result["time_s"])
     return {"robot": robot, "error_deg": error_deg, "episodes": episodes, "success": causes.pop("success", 0),
             "failures": dict(causes), "time_median_s": float(np.median(times)) if times else None,
             "time_p90_s": float(np.percentile(times, 90)) if times else None}

@@ -187,14 +187,16 @@ def write_report(rows: Sequence[dict[str, Any]], out: str | Path, command: str =
         plot_sweep(base, paths["png"], perception)
         text = summarise(base, command, perception)
         paths["map"].unlink(missing_ok=True)
-        for key, group in success_map.panels(rows).items():
+        panels = success_map.panels(rows)
+        for key, group in panels.items():
             if len({axes(r).position_error_mm for r in group}) > 1:
+                label = success_map.panel_label(key)
                 # The first panel's map keeps the historic name; the others are named by panel.
-                path = paths["map"] if key == first.panel else out / f"sweep_map_{success_map.panel_slug(key)}.png"
-                paths[f"map {success_map.panel_label(key)}"] = path
-                success_map.plot_map(group, path, success_map.panel_label(key))
-                text += success_map.region_summary(group, success_map.panel_label(key))
-        if len(success_map.panels(rows)) > 1:
+                if key != first.panel:
+                    paths[f"map {label}"] = out / f"sweep_map_{success_map.panel_slug(key)}.png"
+                success_map.plot_map(group, paths["map" if key == first.panel else f"map {label}"], label)
+                text += success_map.region_summary(group, label)
+        if len(panels) > 1:
             success_map.plot_slices(rows, paths["slices"])
             text += success_map.slices_summary(rows)
         else:
