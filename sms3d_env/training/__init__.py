@@ -7,10 +7,10 @@
 | PPO/SAC training (``train_policy``) | :mod:`~sms3d_env.training.rl` |
 | a falling rate that ends by steps or by wall clock (``WallAwareLinearSchedule``) | :mod:`~sms3d_env.training.schedules` |
 | the start-state curriculum that follows home-start success (``pregrasp_annealing``) | :mod:`~sms3d_env.training.curriculum` |
-| the critic warm-up that freezes PPO's actor first (``critic_warmup``) | :mod:`~sms3d_env.training.warmup` |
 | behaviour cloning + DAgger of the scripted picker (``BCConfig``, ``train_bc``) | :mod:`~sms3d_env.training.imitation` |
 | demonstrations as Minari datasets (``record_datasets``, ``labelled_steps``, ``ExpertLabels``) | :mod:`~sms3d_env.training.demonstrations` |
 | ``sms3d record-demos`` | :mod:`~sms3d_env.training.cli_demos` |
+| recipes as data: a shipped recipe or a recipe file as a config (``read_recipe``, ``Recipe``) | :mod:`~sms3d_env.training.recipes` |
 | RL Baselines3 Zoo: the recipe files (``with_recipe``) and the runs it saves (``zoo_run_of``, ``read_vecnormalize``) | :mod:`~sms3d_env.training.zoo` |
 | residual policies on top of the scripted picker (``ResidualPicker``) | :mod:`~sms3d_env.training.residual` |
 | a descend trigger learned from paired counterfactual rollouts (``TriggerConfig``, ``train_trigger``) | :mod:`~sms3d_env.training.trigger_rollouts` |
@@ -28,12 +28,11 @@ The names load their module on first access (``sms3d --help`` pays for none of S
 from generator.lazy import lazy_exports
 
 _EXPORTS = {
-    "ALGOS": "config", "ENV_IDS": "config", "POSE_SOURCES": "config", "RECIPES": "config",
+    "ALGOS": "config", "ENV_IDS": "config", "POSE_SOURCES": "config",
     "REWARD_TYPES": "config", "TrainConfig": "config", "env_kwargs": "config",
     "make_env": "envs", "train_policy": "rl", "WallAwareLinearSchedule": "schedules",
-    "critic_warmup": "warmup",
     "BCConfig": "imitation", "train_bc": "imitation", "ResidualPicker": "residual",
-    "record_datasets": "demonstrations", "labelled_steps": "demonstrations", "with_recipe": "zoo",
+    "record_datasets": "demonstrations", "labelled_steps": "demonstrations", "with_recipe": "zoo", "Recipe": "recipes", "read_recipe": "recipes",
     "TriggerConfig": "trigger_rollouts", "train_trigger": "trigger_rollouts",
     "NormalizedFlatten": "policy_features",
     "SHIPPED_POLICY": "actor", "SHIPPED_TRIGGER": "actor", "PolicyActor": "actor", "load_model": "actor",

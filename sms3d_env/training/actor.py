@@ -257,8 +257,10 @@ class PolicyActor:
         # Options saved by earlier versions (e.g. the shipped trigger's posture_target) read as now.
         self.env_options = translate_legacy_options(self.saved.get("env_options", {}))
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
-        self.residual_until_held = bool(self.saved.get("residual_until_held", False))
-        self.residual_approach_only = bool(self.saved.get("residual_approach_only", False))
+        for mode in ("residual_until_held", "residual_approach_only"):
+            if self.saved.get(mode):
+                raise PolicyFileError(self.config_path, f"was trained with {mode}, a residual mode removed on "
+                                                        "2026-12-06 (measured worse); sms3d-pick 0.1.0 runs it")
         self.residual_descend_trigger = bool(self.saved.get("residual_descend_trigger", False))
         self.residual_trigger_only = bool(self.saved.get("residual_trigger_only", False))
         # A policy trained on the flattened observation: the keys in their concatenation order.
@@ -285,8 +287,8 @@ class PolicyActor:
         observation is not the one the policy was trained on."""
         from sms3d_env.training.envs import make_env
 
-        env = make_env(self.env_id, self.residual_scale, self.residual_until_held, self.residual_approach_only,
-                       self.residual_descend_trigger, residual_trigger_only=self.residual_trigger_only,
+        env = make_env(self.env_id, self.residual_scale, self.residual_descend_trigger,
+                       residual_trigger_only=self.residual_trigger_only,
                        **{**kwargs, **self.env_options})
         try:
             self._check_observation(env.observation_space)

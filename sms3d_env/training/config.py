@@ -15,7 +15,6 @@ REWARD_TYPES = ("dense", "sparse", "staged")
 BASE_ENV_IDS = ("SMS3DPick-v1", "SMS3DPick-v0")
 TRAIN_ENV_IDS = ("SMS3DPickTrain-v1", "SMS3DPickTrain-v0")
 ENV_IDS = BASE_ENV_IDS + TRAIN_ENV_IDS
-RECIPES = ("rl", "bc", "residual")
 VEC_ENVS = ("subproc", "dummy")
 POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.controller.POSTURE_TARGETS (kept free of mink here)
 
@@ -37,6 +36,15 @@ def env_options(posture_target: str = "estimate") -> dict[str, Any]:
     """The env options beyond the env id's defaults that a policy is trained (and must be run)
     with, as JSON (a run's ``config.json`` keeps them): the controller's posture target."""
     return {} if posture_target == "estimate" else {"controller": {"posture_target": posture_target}}
+
+
+#: Fields of earlier versions, removed because the runs that used them measured worse (what
+#: replaced them and the measurement: CHANGELOG.md, "Removed (2026-12-06)").
+REMOVED_FIELDS = {
+    name: "removed on 2026-12-06 (measured worse; sms3d-pick 0.1.0 still has it)"
+    for name in ("residual_until_held", "residual_approach_only", "residual_descend_trigger",
+                 "residual_trigger_only", "trigger_log_std", "trigger_log_std_final", "time_limit_terminal",
+                 "critic_warmup_steps", "use_sde", "sde_sample_freq")}
 
 
 @dataclass(frozen=True)
@@ -78,28 +86,6 @@ class TrainConfig:
             (``SceneSourceConfig.pool``; resets then cost physics, not placement and compilation).
         residual_scale: > 0 trains a residual on top of the scripted picker
             (:class:`sms3d_env.training.residual.ResidualPicker` with this scale); 0: the policy acts alone.
-        residual_until_held: the residual corrects only until the seal (or grip) holds; the
-            scripted picker's twist and lift then run alone. Needs ``residual_scale`` > 0.
-        residual_approach_only: the residual corrects only the scripted picker's approach; its
-            descent, seal, twist and lift run alone. Needs ``residual_scale`` > 0; excludes
-            ``residual_until_held``.
-        residual_descend_trigger: the residual's action gains an entry that starts the scripted
-            picker's descent near the stand-off point (``ResidualPicker(descend_trigger=True)``).
-            Needs ``residual_scale`` > 0.
-        residual_trigger_only: the policy's action is the descend trigger alone; the scripted
-            picker's command runs unchanged (``ResidualPicker(trigger_only=True)``). Needs
-            ``residual_descend_trigger``; excludes ``residual_until_held`` and
-            ``residual_approach_only``.
-        trigger_log_std: the log standard deviation of that entry's exploration noise; ``None``
-            (default): ``DESCEND_TRIGGER_LOG_STD_INIT`` (-0.9) for a fresh policy, an
-            ``init_model``'s own otherwise. Lower, a stochastic policy fires less often by chance,
-            so that not firing in a stall costs the episode. Needs
-            ``residual_descend_trigger``.
-        trigger_log_std_final: move that log standard deviation on a line from
-            ``trigger_log_std`` (needed) to this over the run (by steps, or by whichever of steps
-            and ``max_wall_s`` runs out first), so that the trigger the policy learned by chance
-            becomes the one its deterministic mean fires (:func:`~sms3d_env.training.schedules.
-            trigger_noise_schedule`). ``None`` (default): a constant noise.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
             uniformly in that range (the env's ``pose_error_deg=(low, high)``; ``pose_source``
             must then be ``"noisy"``, ``pose_error_deg`` and ``position_noise`` 0).
@@ -136,10 +122,6 @@ class TrainConfig:
         pregrasp_anneal: lower that share after each rollout to ``pregrasp_start × (1 − s)``,
             ``s`` the success rate of the last 100 training episodes that started at home
             (:mod:`sms3d_env.training.curriculum`); needs ``pregrasp_start`` > 0.
-        time_limit_terminal: the step that reaches the time limit terminates the episode instead
-            of truncating it, so that PPO does not bootstrap the return there with the critic's
-            value (:mod:`sms3d_env.training.time_limit`; right for the training id, whose
-            observation holds the time since the reset). Needs ``task_obs`` (the training id).
         init_model: a saved model of this algorithm and architecture (``model.zip``, a checkpoint,
             ``best/best_model.zip``) whose weights, and with ``normalize`` observation
             statistics, the run starts from instead of a fresh policy (e.g. a second phase at a
@@ -147,25 +129,8 @@ class TrainConfig:
             folder. The run's own counters start afresh: its step count, learning-rate schedule
             and ``pregrasp_anneal``'s success window (the share is back at ``pregrasp_start``
             until 10 home-start episodes have ended).
-        critic_warmup_steps: PPO: > 0 freezes the actor for this many env steps so that the
-            critic first learns the returns of the policy the run starts from (a residual's:
-            the scripted picker's; :mod:`sms3d_env.training.warmup`); 0: no warm-up.
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
-            standard deviation of 1 on every normalised command; a residual starts quieter). With
-            ``use_sde`` the log standard deviation of each weight of the noise's linear map: the
-            noise on an action is then about ``exp(log_std_init)`` times the norm of the policy's
-            last hidden layer (≈ 8 for a trained 256-wide residual).
-        use_sde: PPO: generalised state-dependent exploration (gSDE; Raffin et al. 2022, "Smooth
-            exploration for robotic reinforcement learning", CoRL): the exploration noise is a
-            linear function of the policy's last hidden layer whose weights are drawn every
-            ``sde_sample_freq`` steps, so it stays the same while the state does. A stalled
-            approach then fires the descend trigger at once or not at all for the draw, instead
-            of escaping by chance within a few steps, and not firing costs the
-            episode. An ``init_model`` with Gaussian noise starts the run with its networks and
-            this run's noise (``log_std_init``, ``trigger_log_std``); one with gSDE noise keeps
-            its own (``trigger_log_std`` still sets the trigger's).
-        sde_sample_freq: with ``use_sde``, the env steps between draws of the noise weights (-1:
-            once per rollout of ``n_steps``; SB3's default).
+            standard deviation of 1 on every normalised command; a residual starts quieter).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
             policy's per-step forward pass is tiny, and with the env workers (and anything else)
             on the same cores, 2 intra-op threads made it ~50x slower here (64 ms vs 1.2 ms).
@@ -177,12 +142,6 @@ class TrainConfig:
     normalize_reward: bool = False
     scene_pool: int = 0
     residual_scale: float = 0.0
-    residual_until_held: bool = False
-    residual_approach_only: bool = False
-    residual_descend_trigger: bool = False
-    residual_trigger_only: bool = False
-    trigger_log_std: float | None = None
-    trigger_log_std_final: float | None = None
     pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
     max_wall_s: float | None = None
@@ -207,9 +166,7 @@ class TrainConfig:
     posture_target: str = "estimate"
     pregrasp_start: float = 0.0
     pregrasp_anneal: bool = False
-    time_limit_terminal: bool = False
     init_model: str | None = None
-    critic_warmup_steps: int = 0
     batch_size: int = 256
     n_steps: int = 1024
     buffer_size: int = 100_000
@@ -217,8 +174,6 @@ class TrainConfig:
     gamma: float = 0.99
     net_arch: tuple[int, ...] = (256, 256)
     log_std_init: float = 0.0
-    use_sde: bool = False
-    sde_sample_freq: int = -1
     device: str = "cpu"
     torch_threads: int = 1
     verbose: int = 1
@@ -250,39 +205,6 @@ class TrainConfig:
         if not (isinstance(self.residual_scale, (int, float)) and math.isfinite(self.residual_scale)
                 and 0 <= self.residual_scale <= 2):
             raise bad("residual_scale", "must be a number in [0, 2]")
-        if not isinstance(self.residual_until_held, bool):
-            raise bad("residual_until_held", "must be a bool")
-        if self.residual_until_held and not self.residual_scale:
-            raise bad("residual_until_held", "applies to a residual (residual_scale > 0)")
-        if not isinstance(self.residual_approach_only, bool):
-            raise bad("residual_approach_only", "must be a bool")
-        if self.residual_approach_only and not self.residual_scale:
-            raise bad("residual_approach_only", "applies to a residual (residual_scale > 0)")
-        if self.residual_approach_only and self.residual_until_held:
-            raise bad("residual_approach_only", "already drops the residual before the seal (leave "
-                                                "residual_until_held False)")
-        if not isinstance(self.residual_descend_trigger, bool):
-            raise bad("residual_descend_trigger", "must be a bool")
-        if self.residual_descend_trigger and not self.residual_scale:
-            raise bad("residual_descend_trigger", "applies to a residual (residual_scale > 0)")
-        if self.residual_descend_trigger and self.algo != "ppo":
-            raise bad("residual_descend_trigger", "needs algo 'ppo' (the trigger's exploration is set on "
-                                                  "PPO's log standard deviation)")
-        if not isinstance(self.residual_trigger_only, bool):
-            raise bad("residual_trigger_only", "must be a bool")
-        if self.residual_trigger_only and not self.residual_descend_trigger:
-            raise bad("residual_trigger_only", "keeps only the descend trigger (set residual_descend_trigger)")
-        if self.residual_trigger_only and (self.residual_until_held or self.residual_approach_only):
-            raise bad("residual_trigger_only", "has no continuous residual for residual_until_held or "
-                                               "residual_approach_only to limit")
-        if self.trigger_log_std is not None and not self.residual_descend_trigger:
-            raise bad("trigger_log_std", "sets the descend trigger's exploration (needs residual_descend_trigger)")
-        if self.trigger_log_std_final is not None and self.trigger_log_std is None:
-            raise bad("trigger_log_std_final", "ends a schedule that starts at trigger_log_std (set it too)")
-        for name in ("trigger_log_std", "trigger_log_std_final"):
-            v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
-                raise bad(name, "must be a finite number")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:
@@ -296,8 +218,7 @@ class TrainConfig:
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise bad(name, "must be an integer >= 1")
         check_bed_size("TrainConfig.num_mushrooms", self.num_mushrooms)
-        for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose", "scene_pool",
-                     "critic_warmup_steps"):
+        for name in ("eval_freq", "checkpoint_freq", "learning_starts", "seed", "verbose", "scene_pool"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise bad(name, "must be an integer >= 0")
@@ -333,11 +254,6 @@ class TrainConfig:
             raise bad("pregrasp_anneal", "must be a bool")
         if self.pregrasp_anneal and not self.pregrasp_start:
             raise bad("pregrasp_anneal", "lowers pregrasp_start, which is 0 (set a share > 0)")
-        if not isinstance(self.time_limit_terminal, bool):
-            raise bad("time_limit_terminal", "must be a bool")
-        if self.time_limit_terminal and self.env_id in BASE_ENV_IDS:
-            raise bad("time_limit_terminal", "ends episodes at a limit the policy must see (the training id "
-                                             "SMS3DPickTrain-v1 observes the time since the reset)")
         if self.init_model is not None and not (isinstance(self.init_model, str) and self.init_model):
             raise bad("init_model", "must be None or the path of a saved model")
         if self.init_model is not None and self.algo != "ppo":
@@ -345,21 +261,10 @@ class TrainConfig:
             # its replay buffer: the run would not continue the saved one.
             raise bad("init_model", "continues PPO runs only (SAC's entropy coefficient and replay "
                                     "buffer are not restored by loading its weights)")
-        if self.critic_warmup_steps and self.algo != "ppo":
-            raise bad("critic_warmup_steps", "freezes PPO's actor only; leave it 0 with SAC")
         if not (0 < self.gamma <= 1):
             raise bad("gamma", "must be in (0, 1]")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
             raise bad("net_arch", "must be a non-empty sequence of positive layer widths")
-        if not isinstance(self.use_sde, bool):
-            raise bad("use_sde", "must be a bool")
-        if self.use_sde and self.algo != "ppo":
-            raise bad("use_sde", "is offered for PPO (the recipes' on-policy runs)")
-        if isinstance(self.sde_sample_freq, bool) or not isinstance(self.sde_sample_freq, int) \
-                or not (self.sde_sample_freq == -1 or self.sde_sample_freq >= 1):
-            raise bad("sde_sample_freq", "must be -1 (once per rollout) or a positive number of steps")
-        if self.sde_sample_freq != -1 and not self.use_sde:
-            raise bad("sde_sample_freq", "sets gSDE's redraws (needs use_sde)")
         if not (isinstance(self.log_std_init, (int, float)) and math.isfinite(self.log_std_init)):
             raise bad("log_std_init", "must be a finite number")
         if not self.out:
@@ -387,15 +292,16 @@ class TrainConfig:
             kw["start"] = PregraspStart(float(self.pregrasp_start))
         kw.update(env_options(self.posture_target))
         return {"env_id": self.env_id, "residual_scale": self.residual_scale,
-                "residual_until_held": self.residual_until_held,
-                "residual_approach_only": self.residual_approach_only,
-                "residual_descend_trigger": self.residual_descend_trigger,
-                **({"residual_trigger_only": True} if self.residual_trigger_only else {}),
-                "flat_observation": self.flat_observation,
-                **({"time_limit_terminal": True} if self.time_limit_terminal else {}), **kw}
+                "flat_observation": self.flat_observation, **kw}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        """The config a run's ``config.json`` records; ``ValueError`` naming a field that
+        :data:`REMOVED_FIELDS` lists when the run set it (the policy would train or act
+        otherwise than recorded)."""
+        for name, value in d.items():
+            if name in REMOVED_FIELDS and value not in (None, False, 0, -1):
+                raise ValueError(f"TrainConfig.{name}={value!r}: {REMOVED_FIELDS[name]}")
         known = {f.name for f in fields(cls)}
         kw = {k: v for k, v in d.items() if k in known}
         if "net_arch" in kw:

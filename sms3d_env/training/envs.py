@@ -8,28 +8,22 @@ from pathlib import Path
 from typing import Any
 
 
-def make_env(env_id: str = "SMS3DPick-v1", residual_scale: float = 0.0, residual_until_held: bool = False,
-             residual_approach_only: bool = False, residual_descend_trigger: bool = False,
-             residual_trigger_only: bool = False, flat_observation: bool = False, time_limit_terminal: bool = False, **kwargs: Any) -> Any:
+def make_env(env_id: str = "SMS3DPick-v1", residual_scale: float = 0.0, residual_descend_trigger: bool = False,
+             residual_trigger_only: bool = False, flat_observation: bool = False, **kwargs: Any) -> Any:
     """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``
-    > 0 wraps the env in a ``ResidualPicker`` (``until_held=residual_until_held``,
-    ``approach_only=residual_approach_only``, ``descend_trigger=residual_descend_trigger``, ``trigger_only=residual_trigger_only``);
-    ``flat_observation`` flattens the dict observation
-    into one vector (gymnasium's ``FlattenObservation``, outermost)."""
+    > 0 wraps the env in a ``ResidualPicker`` (``descend_trigger=residual_descend_trigger``,
+    ``trigger_only=residual_trigger_only``: the learned descend trigger's); ``flat_observation``
+    flattens the dict observation into one vector (gymnasium's ``FlattenObservation``,
+    outermost)."""
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the env ids)
 
     env = gym.make(env_id, **kwargs)
-    if time_limit_terminal:
-        from sms3d_env.training.time_limit import TimeLimitAsTerminal
-
-        env = TimeLimitAsTerminal(env)
     if residual_scale > 0:
         from sms3d_env.training.residual import ResidualPicker
 
-        env = ResidualPicker(env, residual_scale, until_held=residual_until_held,
-                             approach_only=residual_approach_only, descend_trigger=residual_descend_trigger,
+        env = ResidualPicker(env, residual_scale, descend_trigger=residual_descend_trigger,
                              trigger_only=residual_trigger_only)
     if flat_observation:
         env = gym.wrappers.FlattenObservation(env)

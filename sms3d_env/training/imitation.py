@@ -86,7 +86,7 @@ class BCConfig:
     """
 
     demos: tuple[str, ...] = ()
-    episodes: int = 400
+    episodes: int = 600
     num_mushrooms: tuple[int, ...] = (10, 25)
     action_noise: float = 0.2
     pose_error_deg: float = 0.0

@@ -52,8 +52,7 @@ from sms3d_env.training.model_files import (
     save_replay_buffer,
 )
 from sms3d_env.training.policy_spec import PolicySpec, algorithm_class
-from sms3d_env.training.schedules import falling_rate, trigger_noise_schedule
-from sms3d_env.training.warmup import critic_warmup
+from sms3d_env.training.schedules import falling_rate
 
 
 def _tensorboard_available() -> bool:
@@ -78,7 +77,7 @@ def _model_arguments(cfg: TrainConfig) -> tuple[str, dict[str, Any]]:
                   verbose=cfg.verbose)
     if cfg.algo == "ppo":
         return policy, dict(common, n_steps=cfg.n_steps, batch_size=min(cfg.batch_size, cfg.n_steps * cfg.n_envs),
-                            target_kl=cfg.target_kl, use_sde=cfg.use_sde, sde_sample_freq=cfg.sde_sample_freq)
+                            target_kl=cfg.target_kl)
     return policy, dict(common, buffer_size=cfg.buffer_size, learning_starts=cfg.learning_starts,
                         batch_size=cfg.batch_size)
 
@@ -105,16 +104,9 @@ def _check_init_model(cfg: TrainConfig) -> None:
                              "a continued run needs an out of its own")
     saved = saved_config_path(path)
     saved_cfg = {} if saved is None else read_saved_config(saved)
-    trigger = bool(saved_cfg.get("residual_descend_trigger", False))
-    if trigger != cfg.residual_descend_trigger:
-        raise InitModelError(f"TrainConfig.init_model: {path} was trained {'with' if trigger else 'without'} the "
-                             f"residual's descend trigger ({8 if trigger else 7} actions); set "
-                             f"residual_descend_trigger={trigger} to start from it")
-    trigger_only = bool(saved_cfg.get("residual_trigger_only", False))
-    if trigger_only != cfg.residual_trigger_only:
-        raise InitModelError(f"TrainConfig.init_model: {path} was trained {'with' if trigger_only else 'without'} "
-                             f"residual_trigger_only ({1 if trigger_only else 8} actions); set "
-                             f"residual_trigger_only={trigger_only} to start from it")
+    if saved_cfg.get("residual_descend_trigger"):
+        raise InitModelError(f"TrainConfig.init_model: {path} is a learned descend trigger (sms3d train-trigger), "
+                             "whose action is the trigger; a run continues a pick policy of 7 actions")
     flat = bool(saved_cfg.get("flat_observation", False))
     if flat != cfg.flat_observation:
         raise InitModelError(f"TrainConfig.init_model: {path} was trained on "
@@ -129,27 +121,13 @@ def _check_init_model(cfg: TrainConfig) -> None:
                              f"({stats.name}); set normalize=True (--normalize) to start from it")
 
 
-def _set_trigger_exploration(model: Any, cfg: TrainConfig) -> None:
-    """The descend trigger's log standard deviation (the action's last entry): ``cfg.trigger_log_std``, or
-    for a fresh policy ``DESCEND_TRIGGER_LOG_STD_INIT`` (an ``init_model`` keeps its own)."""
-    if not cfg.residual_descend_trigger or (cfg.trigger_log_std is None and cfg.init_model is not None):
-        return
-    from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT, set_trigger_log_std
-
-    set_trigger_log_std(model.policy, DESCEND_TRIGGER_LOG_STD_INIT if cfg.trigger_log_std is None
-                        else cfg.trigger_log_std)
-
-
 def _start_from(model: Any, env: Any, cfg: TrainConfig) -> None:
     """``cfg.init_model``: its weights into ``model`` and, with ``normalize``, its observation
     statistics into ``env`` (``InitModelError`` naming the file)."""
     _check_init_model(cfg)
     path = Path(cfg.init_model)
     try:
-        if cfg.use_sde:
-            _start_sde_from(model, path, cfg.device)
-        else:
-            model.set_parameters(str(path), exact_match=True, device=cfg.device)
+        model.set_parameters(str(path), exact_match=True, device=cfg.device)
     except (ValueError, RuntimeError, KeyError) as exc:
         raise InitModelError(f"TrainConfig.init_model: {path} does not fit a {cfg.algo} policy with "
                              f"net_arch {list(cfg.net_arch)} on {cfg.env_id} ({exc})") from None
@@ -171,22 +149,6 @@ def _check_init_model_fits(cfg: TrainConfig) -> None:
         _start_from(_build_model(cfg, env), env, cfg)
     finally:
         env.close()
-
-
-def _start_sde_from(model: Any, path: Path, device: str) -> None:
-    """A gSDE run from a saved policy: its networks and, from a gSDE policy, its noise; from a
-    Gaussian policy (whose log standard deviation has another shape and meaning) this run's
-    noise and a fresh optimiser."""
-    from stable_baselines3.common.save_util import load_from_zip_file
-
-    _, params, _ = load_from_zip_file(str(path), device=device, load_data=False)  # the weights: no unpickling
-    if params["policy"]["log_std"].shape == model.policy.log_std.shape:
-        model.set_parameters(params, exact_match=True, device=device)
-        return
-    weights = {k: v for k, v in params["policy"].items() if k != "log_std"}
-    missing, unexpected = model.policy.load_state_dict(weights, strict=False)
-    if unexpected or set(missing) != {"log_std"}:
-        raise ValueError(f"missing {sorted(set(missing) - {'log_std'})}, unexpected {sorted(unexpected)}")
 
 
 def _save_model_and_stats(model: Any, env: Any, normalize: bool, model_path: Path, stats_path: Path) -> None:
@@ -438,7 +400,8 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
 
     if cfg.init_model is not None:
         _check_init_model_fits(cfg)
-    saved = {**asdict(cfg), "env_options": env_options(cfg.posture_target)}
+    saved = {"recipe": "residual" if cfg.residual_scale else "rl", **asdict(cfg),
+             "env_options": env_options(cfg.posture_target)}
     if cfg.flat_observation:
         saved["observation_keys"] = _observation_keys(cfg)
     run = open_run_folder(cfg.out, run_settings(saved), overwrite=overwrite, may_change=RUN_ONLY_FIELDS)
@@ -464,7 +427,6 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
             model = _build_model(cfg, env)
             if cfg.init_model is not None:
                 _start_from(model, env, cfg)
-            _set_trigger_exploration(model, cfg)
         formats = (["stdout"] if cfg.verbose else []) + (["tensorboard"] if _tensorboard_available() else [])
         logger = configure(str(out), formats)
         logger.output_formats.append(_progress_csv(out / "progress.csv", start if run.resumed else None))
@@ -482,10 +444,6 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
             callbacks.append(_checkpoints(env, out / "checkpoints", cfg))
         if cfg.pregrasp_anneal:
             callbacks.append(pregrasp_annealing(cfg.pregrasp_start))
-        if cfg.critic_warmup_steps:
-            callbacks.append(critic_warmup(cfg.critic_warmup_steps))
-        if cfg.trigger_log_std_final is not None:
-            callbacks.append(trigger_noise_schedule(cfg.trigger_log_std, cfg.trigger_log_std_final, cfg.max_wall_s))
         if cfg.max_wall_s is not None:
             callbacks.append(wall_clock_limit(cfg.max_wall_s))
         t0 = time.perf_counter()

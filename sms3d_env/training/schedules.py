@@ -85,34 +85,3 @@ def falling_learning_rate(final: float, max_wall_s: float | None = None) -> Any:
 
     return _FallingLearningRate()
 
-
-def trigger_noise_schedule(start: float, end: float, max_wall_s: float | None) -> Any:
-    """An SB3 callback: before each rollout, set the descend trigger's log standard deviation
-    (``residual.set_trigger_log_std``) on a line from ``start`` to ``end`` over the run (by steps, or
-    with ``max_wall_s`` over whichever runs out first, as :class:`WallAwareLinearSchedule`), and
-    log it as ``train/trigger_log_std``.
-
-    Why (measured): trained at a fixed noise of 0.4, the trigger is
-    fired *by chance* within a few steps of any stall, so its mean needs no more than that (0.23
-    in stalled steps against the 0.5 that fires) and the deterministic policy never fires.
-    Shrinking the noise is meant to raise the mean to the threshold, where the stochastic and
-    the deterministic policies agree. Measured: from 0.2 to 0.03 over 25 minutes it rose to 0.39,
-    then sank once stalls were no longer escaped by chance (the noise fell faster than the mean
-    rose).
-    """
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    schedule = falling_rate(start, end, max_wall_s)
-
-    class _TriggerNoise(BaseCallback):
-        def _on_rollout_start(self) -> None:
-            from sms3d_env.training.residual import set_trigger_log_std
-
-            value = float(schedule(self.model._current_progress_remaining))
-            set_trigger_log_std(self.model.policy, value)
-            self.logger.record("train/trigger_log_std", value)
-
-        def _on_step(self) -> bool:
-            return True
-
-    return _TriggerNoise()

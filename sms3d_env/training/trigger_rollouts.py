@@ -130,6 +130,8 @@ class TriggerConfig:
             raise bad("learning_rate", "must be a number > 0")
         if len(self.net_arch) == 0 or any(int(h) < 1 for h in self.net_arch):
             raise bad("net_arch", "must list at least one layer width >= 1")
+        object.__setattr__(self, "pose_error_range_deg", tuple(float(v) for v in lo_hi))
+        object.__setattr__(self, "net_arch", tuple(int(h) for h in self.net_arch))
 
     def label_settings(self, first: int, stop: int) -> dict[str, Any]:
         """What the label file of episodes ``first .. stop - 1`` holds and depends on: a file made

@@ -40,8 +40,8 @@ PREGRASP_ANNEALING = "sms3d_env.training.curriculum.pregrasp_annealing"
 FALLING_LEARNING_RATE = "sms3d_env.training.schedules.falling_learning_rate"
 WALL_CLOCK_LIMIT = "sms3d_env.training.rl.wall_clock_limit"
 #: Recipe keys that are ``TrainConfig`` fields of the same name.
-SAME_NAME_KEYS = ("n_envs", "n_steps", "batch_size", "gamma", "learning_rate", "target_kl", "use_sde",
-                  "sde_sample_freq", "buffer_size", "learning_starts")
+SAME_NAME_KEYS = ("n_envs", "n_steps", "batch_size", "gamma", "learning_rate", "target_kl", "buffer_size",
+                  "learning_starts")
 #: ``env_kwargs`` entries that are ``TrainConfig`` fields of the same name.
 SAME_NAME_ENV_KWARGS = ("pose_source", "reward_type")
 #: ``env_kwargs`` entries a policy was trained with but need not run with: the training beds, the
@@ -233,8 +233,12 @@ def with_recipe(cfg: Any, recipe: str | Path) -> Any:
     name) sets; its entry is ``cfg.env_id``'s when the file has one, else its only one. A field
     that ``cfg`` sets to neither its default nor the recipe's value is a ``RecipeError`` (a flag
     given beside the file); the result is validated as any ``TrainConfig``."""
+    import warnings
     from dataclasses import replace
 
+    warnings.warn("sms3d_env.training.with_recipe is deprecated on 2026-12-06 and removed in 0.3.0: use "
+                  "sms3d_env.training.read_recipe(recipe).config, whose fields replace one another by "
+                  "Recipe.with_fields", DeprecationWarning, stacklevel=2)
     path = recipe_path(recipe)
     defaults = type(cfg)()
     env_ids = read_zoo_yaml(path)

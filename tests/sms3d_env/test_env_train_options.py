@@ -310,35 +310,6 @@ def test_a_zero_residual_is_the_scripted_picker_exactly():
         ResidualPicker(plain, scale=0.0)
 
 
-def test_a_residual_until_held_leaves_the_twist_and_lift_to_the_scripted_picker():
-    """After the seal, ``until_held`` drops the residual: a full-scale push on every command
-    from then on still picks as the scripted picker does; without it the push changes the episode,
-    and so does the same push before the seal with it."""
-    from sms3d_env.pickers import run_episode
-    from sms3d_env.training.residual import ResidualPicker
-
-    plain = gym.make("SMS3DPickTrain-v0", scene=SMALL)
-    expected = run_episode(plain, ScriptedPicker.for_env(plain), seed=2)
-    assert expected["success"]
-    outcomes = {}
-    for until_held, push_when_held in ((True, True), (False, True), (True, False)):
-        env = ResidualPicker(gym.make("SMS3DPickTrain-v0", scene=SMALL), scale=1.0, until_held=until_held)
-        obs, _ = env.reset(seed=2)
-        done, steps = False, 0
-        while not done:
-            held = obs["suction"][1] > 0.5
-            push = np.full(7, float(held == push_when_held), np.float32)
-            obs, _, terminated, truncated, info = env.step(push)
-            steps += 1
-            done = terminated or truncated
-        outcomes[until_held, push_when_held] = (info["is_success"], steps)
-    assert outcomes[True, True] == (expected["success"], expected["steps"])
-    assert outcomes[False, True] != outcomes[True, True]
-    assert outcomes[True, False] != outcomes[True, True]
-    with pytest.raises(ValueError, match="until_held"):
-        ResidualPicker(plain, until_held=1)
-
-
 class _RecordCommands(gym.Wrapper):
     """Keeps every command the wrapped env receives."""
 
@@ -351,32 +322,6 @@ class _RecordCommands(gym.Wrapper):
         return self.env.step(action)
 
 
-def test_an_approach_only_residual_leaves_the_descent_on_to_the_scripted_picker():
-    from sms3d_env.training.residual import ResidualPicker
-
-    recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene=SMALL))
-    env = ResidualPicker(recorder, scale=0.5, approach_only=True)
-    obs, _ = env.reset(seed=2)
-    # A push for the first 10 steps, none until the scripted picker has reached its stand-off
-    # point, and a push on every step after that (which the wrapper must drop).
-    phases, bases, pushes, done = [], [], [], False
-    while not done:
-        phases.append(env._base_phase)
-        bases.append(obs["base_action"].copy())
-        pushes.append(0.5 if len(phases) <= 10 or phases[-1] != "approach" else 0.0)
-        obs, _, terminated, truncated, _ = env.step(np.full(7, pushes[-1], np.float32))
-        done = terminated or truncated
-    approach = [p == "approach" for p in phases]
-    assert approach[0] and not all(approach)  # the episode left the approach
-    for in_approach, push, base, command in zip(approach, pushes, bases, recorder.commands):
-        expected = np.clip(base + 0.5 * push, -1, 1) if in_approach else base
-        np.testing.assert_allclose(command, expected, atol=1e-6)
-    with pytest.raises(ValueError, match="approach_only"):
-        ResidualPicker(recorder, approach_only=True, until_held=True)
-    with pytest.raises(ValueError, match="approach_only"):
-        ResidualPicker(recorder, approach_only="yes")
-
-
 def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
     from sms3d_env.training.residual import (
         DESCEND_TRIGGER,
@@ -386,7 +331,7 @@ def test_the_descend_trigger_starts_the_descent_near_the_stand_off_point_only():
 
     def run(trigger_value):
         recorder = _RecordCommands(gym.make("SMS3DPickTrain-v0", scene=SMALL))
-        env = ResidualPicker(recorder, scale=0.5, approach_only=True, descend_trigger=True)
+        env = ResidualPicker(recorder, scale=0.5, descend_trigger=True)
         assert env.action_space.shape == (8,)
         obs, _ = env.reset(seed=2)
         action = np.zeros(8, np.float32)
@@ -457,8 +402,6 @@ def test_a_trigger_only_residual_sends_the_scripted_commands_and_fires_the_desce
     assert env.action_space.shape == (1,)
     with pytest.raises(ValueError, match="descend_trigger=True"):
         ResidualPicker(plain, trigger_only=True)
-    with pytest.raises(ValueError, match="no continuous residual"):
-        ResidualPicker(plain, descend_trigger=True, trigger_only=True, approach_only=True)
     with pytest.raises(ValueError, match="trigger_only must be a bool"):
         ResidualPicker(plain, descend_trigger=True, trigger_only="yes")
 

@@ -19,40 +19,6 @@ from sms3d_env.robots import ROBOTS
 SMALL = SceneConfig().replace(placement__num_mushrooms=10)
 
 
-def _can_touch(model, a: int, b: int) -> bool:
-    """MuJoCo's contact filter between geoms ``a`` and ``b`` (either's contype in the other's
-    conaffinity)."""
-    return bool(model.geom_contype[a] & model.geom_conaffinity[b] or model.geom_contype[b] & model.geom_conaffinity[a])
-
-
-@pytest.mark.parametrize("robot", ROBOTS)
-def test_every_robot_body_can_touch_the_soil_and_every_mushroom(robot):
-    env = gym.make("SMS3DPick-v1", robot=robot, scene=SMALL)
-    env.reset(seed=3)
-    u = env.unwrapped
-    m, w = u.model, u.world
-    robot_bodies = {int(m.geom_bodyid[g]) for g in np.nonzero(w.robot_geom)[0]}
-    assert len(robot_bodies) >= 6
-    mushroom_geoms = np.concatenate([w.cap_geoms, w.stem_geoms])
-    for body in robot_bodies:
-        geoms = np.nonzero((m.geom_bodyid == body) & w.robot_geom)[0]
-        name = m.body(body).name
-        assert any(_can_touch(m, g, w.terrain_geom) for g in geoms), f"{name} passes through the soil"
-        for k in mushroom_geoms:
-            assert any(_can_touch(m, g, k) for g in geoms), f"{name} passes through {m.geom(k).name}"
-
-
-def test_the_jaco_of_v0_still_has_its_ghost_links():
-    # The comparison the version history states: v0's base, shoulder, upper arm, forearm and
-    # first wrist link collide with nothing.
-    env = gym.make("SMS3DPick-v0", scene=SMALL)
-    env.reset(seed=3)
-    m, w = env.unwrapped.model, env.unwrapped.world
-    ghosts = {m.body(int(m.geom_bodyid[g])).name for g in np.nonzero(w.robot_geom)[0]
-              if not _can_touch(m, g, w.terrain_geom)}
-    assert ghosts == {f"jaco/{b}" for b in ("b_base", "b_1", "b_2", "b_3", "b_4")}
-
-
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_the_exact_pose_scripted_picker_picks_with_every_link_colliding(robot):
     env = gym.make("SMS3DPick-v1", robot=robot, scene=SMALL)

@@ -18,6 +18,7 @@ import pytest
 from sms3d_env.training.actor import PolicyActor
 from sms3d_env.training.config import TrainConfig
 from sms3d_env.training.model_files import PolicyFileError
+from sms3d_env.training.recipes import read_recipe
 from sms3d_env.training.zoo import (
     RecipeError,
     read_vecnormalize,
@@ -117,8 +118,9 @@ def test_a_crafted_pickle_runs_nothing_and_is_refused(tmp_path):
 
 
 def test_train_policy_reads_the_recipe_into_the_same_settings():
-    cfg = with_recipe(TrainConfig(), "ppo")
-    assert cfg.env_id == ENV_ID and (cfg.normalize, cfg.normalize_reward, cfg.flat_observation) == (True, True, True)
+    recipe = read_recipe("ppo")
+    cfg = recipe.config
+    assert recipe.kind == "rl" and cfg.env_id == ENV_ID and (cfg.normalize, cfg.normalize_reward, cfg.flat_observation) == (True, True, True)
     assert (cfg.pregrasp_start, cfg.pregrasp_anneal, cfg.num_mushrooms, cfg.scene_pool) == (0.75, True, 10, 500)
     assert cfg.learning_rate_final == pytest.approx(cfg.learning_rate / 10) and cfg.learning_rate_by_wall
     assert cfg.max_wall_s == 7000 and cfg.target_kl == 0.02 and cfg.log_std_init == -1.0
@@ -132,7 +134,7 @@ def test_a_recipe_with_the_env_arguments_of_earlier_versions_reads_the_same(tmp_
     assert earlier.count("scene_pool") == 1 and earlier.count("pregrasp_start") == 1
     path = tmp_path / "earlier.yml"
     path.write_text(earlier)
-    assert with_recipe(TrainConfig(), path) == with_recipe(TrainConfig(), "ppo")
+    assert read_recipe(path).config == read_recipe("ppo").config
 
 
 @pytest.mark.parametrize("entry, named", [
@@ -150,13 +152,10 @@ def test_recipe_keys_without_a_setting_are_refused_by_name(tmp_path, entry, name
     path = tmp_path / "recipe.yml"
     path.write_text(f"{ENV_ID}:\n  n_envs: 1\n{entry}")
     with pytest.raises(RecipeError, match=re.escape(named)):
-        with_recipe(TrainConfig(), path)
+        read_recipe(path)
 
 
-def test_a_flag_beside_the_recipe_file_is_refused(capsys):
-    from sms3d_env.training.cli import main
-
-    assert main(["train-policy", "--conf-file", "ppo", "--learning-rate", "1e-3"]) == 2
-    assert "learning_rate" in capsys.readouterr().out
-    assert main(["train-policy", "--conf-file", "no-such-recipe"]) == 2
-    assert "no-such-recipe" in capsys.readouterr().out
+def test_with_recipe_is_deprecated_and_still_reads_the_recipe():
+    with pytest.warns(DeprecationWarning, match="2026-12-06.*read_recipe"):
+        cfg = with_recipe(TrainConfig(), "ppo")
+    assert cfg == read_recipe("ppo").config

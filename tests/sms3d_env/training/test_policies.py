@@ -63,7 +63,7 @@ def test_a_rerun_with_other_settings_is_refused_and_keeps_the_model(bc_run, caps
     model = (out / "model.zip").read_bytes()
     with pytest.raises(RunFolderError, match=r"epochs \(2 → 3\).*--overwrite"):
         train_bc(BCConfig(**{**cfg.__dict__, "epochs": 3}), progress=False)
-    assert main(["train-policy", "--recipe", "bc", "--out", str(out), "--epochs", "3"]) == 2
+    assert main(["train-policy", str(out / "config.json"), "--hyperparams", "epochs=3"]) == 2
     assert "holds a run made with other settings" in capsys.readouterr().out
     assert (out / "model.zip").read_bytes() == model
     assert train_bc(cfg, progress=False) == summary and "is complete" in capsys.readouterr().out

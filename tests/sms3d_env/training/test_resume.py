@@ -33,7 +33,10 @@ def _steps_column(path) -> list[float]:
 
 def test_a_killed_training_resumes_from_its_latest_checkpoint_and_says_so(tmp_path):
     out = tmp_path / "run"
-    command = [sys.executable, "-m", "sms3d_env.training", "train-policy", "--steps", "1024", "--num-mushrooms", "8",
+    recipe = tmp_path / "ppo_defaults.yml"
+    recipe.write_text("recipe: rl  # TrainConfig's defaults: PPO on SMS3DPick-v1\n")
+    command = [sys.executable, "-m", "sms3d_env.training", "train-policy", str(recipe), "--steps", "1024",
+               "--num-mushrooms", "8",
                "--checkpoint-freq", "128", "--eval-freq", "256", "--eval-episodes", "1", "--vec-env", "dummy",
                "--out", str(out)]
     log = (tmp_path / "first.log").open("w")
@@ -75,11 +78,12 @@ def test_a_rerun_with_other_settings_is_refused_and_leaves_the_run_usable(tmp_pa
     train_policy(cfg)
     files = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
 
-    assert main(["train-policy", "--out", str(out), "--num-mushrooms", "101"]) == 2
+    # A run's config.json is a recipe of that run.
+    assert main(["train-policy", str(out / "config.json"), "--num-mushrooms", "101"]) == 2
     assert "TrainConfig.num_mushrooms" in capsys.readouterr().out
     with pytest.raises(RunFolderError, match=r"num_mushrooms \(8 → 9\).*--overwrite"):
         train_policy(TrainConfig(**{**cfg.__dict__, "num_mushrooms": 9}))
-    assert main(["train-policy", "--out", str(out), "--steps", "64", "--num-mushrooms", "8"]) == 2
+    assert main(["train-policy", str(out / "config.json"), "--seed", "3"]) == 2
     assert "holds a run made with other settings" in capsys.readouterr().out
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files
     assert main(["eval-policy", "--model", str(out / "model.zip"), "--episodes", "1"]) == 0
@@ -95,7 +99,9 @@ def test_a_rerun_with_other_settings_is_refused_and_leaves_the_run_usable(tmp_pa
 
 
 def test_nothing_is_written_for_a_bed_size_the_generator_refuses(tmp_path, capsys):
-    assert main(["train-policy", "--out", str(tmp_path / "new"), "--num-mushrooms", "101"]) == 2
+    recipe = tmp_path / "ppo_defaults.yml"
+    recipe.write_text("recipe: rl\n")
+    assert main(["train-policy", str(recipe), "--out", str(tmp_path / "new"), "--num-mushrooms", "101"]) == 2
     assert "TrainConfig.num_mushrooms" in capsys.readouterr().out
     assert not (tmp_path / "new").exists()
 

@@ -17,7 +17,7 @@ from sms3d_env.training import (
     register,
     train_policy,
 )
-from sms3d_env.training import config as training_config
+from sms3d_env.training.model_files import PolicyFileError
 from sms3d_env.training.rl import InitModelError
 
 FAST = dict(num_mushrooms=8, max_episode_steps=40, eval_freq=128, eval_episodes=1,
@@ -103,14 +103,8 @@ def test_sac_short_run(tmp_path):
     ({"posture_target": "home"}, "posture_target"),
     ({"pregrasp_start": 1.5}, "pregrasp_start"),
     ({"pregrasp_start": -0.1}, "pregrasp_start"),
-    ({"critic_warmup_steps": -1}, "critic_warmup_steps"),
-    ({"algo": "sac", "critic_warmup_steps": 100}, "critic_warmup_steps"),
-    ({"residual_approach_only": True}, "residual_approach_only"),  # no residual
-    ({"residual_scale": 0.5, "residual_approach_only": True, "residual_until_held": True}, "residual_approach_only"),
     ({"pose_source": "noisy", "position_noise": 0.002, "pose_error_range_deg": (0.0, 30.0)}, "pose_error_range_deg"),
     ({"gamma": 0.0}, "gamma"),
-    ({"time_limit_terminal": True}, "time_limit_terminal"),  # SMS3DPick-v0 does not show the clock
-    ({"env_id": "SMS3DPickTrain-v0", "time_limit_terminal": 1}, "time_limit_terminal"),
     ({"vec_env": "threads"}, "vec_env"),
     ({"flat_observation": 1}, "flat_observation"),
 ])
@@ -145,157 +139,33 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
     assert "controller" not in TrainConfig().env_kwargs()
 
 
-def test_a_terminal_time_limit_reaches_the_training_envs_only(tmp_path):
-    """``time_limit_terminal`` wraps the training envs (and the periodic evaluation's, where it
-    changes nothing that is counted), not the saved env options every later evaluation uses."""
-    from sms3d_env.training.envs import make_env
-    from sms3d_env.training.time_limit import TimeLimitAsTerminal
-
-    cfg = TrainConfig(env_id="SMS3DPickTrain-v0", time_limit_terminal=True)
-    env = make_env(**cfg.env_kwargs())
-    try:
-        wrapper = env
-        while not isinstance(wrapper, TimeLimitAsTerminal):
-            wrapper = wrapper.env
-        assert wrapper.spec.max_episode_steps == cfg.max_episode_steps
-    finally:
-        env.close()
-    assert "time_limit_terminal" not in TrainConfig(env_id="SMS3DPickTrain-v0").env_kwargs()
-    assert "time_limit_terminal" not in training_config.env_options(cfg.posture_target)
-
-
-@pytest.mark.parametrize("option", ["residual_until_held", "residual_approach_only", "residual_descend_trigger"])
-def test_a_residual_that_stops_early_is_trained_and_rebuilt_so(tmp_path, option):
-    """``residual_until_held`` / ``residual_approach_only`` / ``residual_descend_trigger`` reach the
-    training env's wrapper and,
-    through ``config.json``, the env every later evaluation builds for the policy."""
+def test_a_residual_is_trained_and_rebuilt_on_the_scripted_picker(tmp_path):
+    """A residual (``residual_scale`` > 0) reaches the training env's wrapper and, through
+    ``config.json``, the env every later evaluation builds for the policy; a config that names
+    a removed residual mode is refused by name."""
     from sms3d_env.training.actor import PolicyActor
 
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, **{option: True},
-                      normalize=True, total_steps=128, n_steps=128, batch_size=64, out=str(tmp_path),
-                      **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, normalize=True, total_steps=128,
+                      n_steps=128, batch_size=64, out=str(tmp_path), **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
     train_policy(cfg)
-    env = PolicyActor(tmp_path / "model.zip").make_env()
-    try:
-        wrapper_flag = {"residual_until_held": "until_held", "residual_approach_only": "approach_only",
-                        "residual_descend_trigger": "descend_trigger"}[option]
-        assert getattr(env, wrapper_flag) and env.scale == 0.5
-        actor = PolicyActor(tmp_path / "model.zip")
-        obs, _ = env.reset(seed=0)
-        action = actor(obs)
-        assert action.shape == env.action_space.shape == ((8,) if option == "residual_descend_trigger" else (7,))
-        env.step(action)
-        if option == "residual_descend_trigger":  # the trigger explores wider than the residual
-            from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT
-
-            log_std = actor.model.policy.log_std.detach().numpy()
-            assert log_std[7] == pytest.approx(DESCEND_TRIGGER_LOG_STD_INIT, abs=0.05)
-            assert np.all(np.abs(log_std[:7] - cfg.log_std_init) < 0.05)
-    finally:
-        env.close()
-    with pytest.raises(ValueError, match=option):
-        TrainConfig(**{option: True})
-    if option == "residual_descend_trigger":
-        with pytest.raises(ValueError, match="needs algo 'ppo'"):
-            TrainConfig(algo="sac", residual_scale=0.5, residual_descend_trigger=True)
-
-
-def test_a_trigger_only_residual_is_trained_and_rebuilt_with_its_one_action(tmp_path):
-    """``residual_trigger_only`` reaches the wrapper and, through ``config.json``, the env of
-    every later evaluation; the one action explores with the trigger's noise; a run of the other
-    action layout cannot start from it."""
-    from sms3d_env.training.actor import PolicyActor
-    from sms3d_env.training.residual import DESCEND_TRIGGER_LOG_STD_INIT
-
-    common = dict(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
-                  normalize=True, total_steps=128, n_steps=128, batch_size=64,
-                  **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
-    train_policy(TrainConfig(residual_trigger_only=True, out=str(tmp_path / "only"), **common))
-    actor = PolicyActor(tmp_path / "only" / "model.zip")
+    assert json.loads((tmp_path / "config.json").read_text())["recipe"] == "residual"
+    actor = PolicyActor(tmp_path / "model.zip")
     env = actor.make_env()
     try:
-        assert env.trigger_only and env.action_space.shape == (1,)
+        assert env.scale == 0.5 and not env.descend_trigger
         obs, _ = env.reset(seed=0)
         action = actor(obs)
-        assert action.shape == (1,)
+        assert action.shape == env.action_space.shape == (7,)
         env.step(action)
-        assert actor.model.policy.log_std.detach().numpy() == pytest.approx([DESCEND_TRIGGER_LOG_STD_INIT], abs=0.05)
     finally:
         env.close()
-    with pytest.raises(InitModelError, match="with residual_trigger_only.*residual_trigger_only=True"):
-        train_policy(TrainConfig(init_model=str(tmp_path / "only" / "model.zip"), out=str(tmp_path / "eight"),
-                                 **common))
-    with pytest.raises(ValueError, match="TrainConfig.residual_trigger_only.*residual_descend_trigger"):
-        TrainConfig(residual_scale=0.5, residual_trigger_only=True)
-    with pytest.raises(ValueError, match="TrainConfig.residual_trigger_only.*no continuous residual"):
-        TrainConfig(residual_scale=0.5, residual_descend_trigger=True, residual_trigger_only=True,
-                    residual_approach_only=True)
-
-
-def test_the_trigger_exploration_is_set_fresh_and_on_a_continuation_only_when_asked(tmp_path):
-    """``trigger_log_std`` sets the trigger entry's noise of a fresh policy and of one continued
-    from ``init_model``; left at None, a continuation keeps the saved policy's own;
-    ``trigger_log_std_final`` moves it along the run."""
-    from stable_baselines3 import PPO
-
-    def run(name, **kw):
-        kw = {"total_steps": 64, **kw}
-        cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
-                          normalize=True, n_steps=64, batch_size=64, out=str(tmp_path / name),
-                          learning_rate=1e-12, **{**FAST, "eval_freq": 0, "checkpoint_freq": 0}, **kw)
-        train_policy(cfg)
-        return PPO.load(str(tmp_path / name / "model.zip"), device="cpu").policy.log_std.detach().numpy()
-
-    fresh = run("fresh", trigger_log_std=-1.6)
-    assert fresh[7] == pytest.approx(-1.6, abs=1e-3)
-    kept = run("kept", init_model=str(tmp_path / "fresh" / "model.zip"))
-    assert kept[7] == pytest.approx(-1.6, abs=1e-3)
-    assert run("set", init_model=str(tmp_path / "fresh" / "model.zip"), trigger_log_std=-2.5)[7] == pytest.approx(
-        -2.5, abs=1e-3)
-    # A schedule over two rollouts of 64 steps: the second one runs half way along it.
-    scheduled = run("scheduled", total_steps=128, trigger_log_std=-1.6, trigger_log_std_final=-3.0)
-    assert scheduled[7] == pytest.approx(-2.3, abs=1e-3)
-    with pytest.raises(ValueError, match="TrainConfig.trigger_log_std_final"):
-        TrainConfig(residual_scale=0.5, residual_descend_trigger=True, trigger_log_std_final=-3.0)
-    with pytest.raises(ValueError, match="TrainConfig.trigger_log_std"):
-        TrainConfig(residual_scale=0.5, trigger_log_std=-1.6)  # no trigger
-    with pytest.raises(ValueError, match="TrainConfig.trigger_log_std"):
-        TrainConfig(residual_scale=0.5, residual_descend_trigger=True, trigger_log_std=float("nan"))
-
-
-def test_a_gsde_run_starts_from_a_gaussian_policys_networks_with_its_own_noise(tmp_path):
-    """``use_sde`` trains PPO with state-dependent noise; from a Gaussian policy it keeps the
-    saved networks (the deterministic action is unchanged at a zero rate) and sets its own noise
-    (``log_std_init``; the trigger's column from ``trigger_log_std``)."""
-    from stable_baselines3 import PPO
-
-    def run(name, **kw):
-        cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
-                          normalize=True, flat_observation=True, n_steps=64, batch_size=64, total_steps=64,
-                          out=str(tmp_path / name),
-                          learning_rate=1e-12, **{**FAST, "eval_freq": 0, "checkpoint_freq": 0}, **kw)
-        train_policy(cfg)
-        return PPO.load(str(tmp_path / name / "model.zip"), device="cpu")
-
-    gaussian = run("gaussian")
-    sde = run("sde", use_sde=True, sde_sample_freq=16, log_std_init=-3.5, trigger_log_std=-3.0,
-              init_model=str(tmp_path / "gaussian" / "model.zip"))
-    assert sde.use_sde and sde.sde_sample_freq == 16
-    log_std = sde.policy.log_std.detach().numpy()
-    assert log_std.shape == (32, 8)  # the last hidden layer's width x the actions
-    np.testing.assert_allclose(log_std[:, :7], -3.5, atol=1e-3)
-    np.testing.assert_allclose(log_std[:, 7], -3.0, atol=1e-3)
-    obs = np.random.default_rng(0).normal(size=(5, *gaussian.observation_space.shape)).astype(np.float32)
-    np.testing.assert_allclose(sde.predict(obs, deterministic=True)[0], gaussian.predict(obs, deterministic=True)[0],
-                               atol=1e-5)
-    kept = run("sde_kept", use_sde=True, log_std_init=-2.0, init_model=str(tmp_path / "sde" / "model.zip"))
-    np.testing.assert_allclose(kept.policy.log_std.detach().numpy(), log_std, atol=1e-6)  # a gSDE run's own noise
-    with pytest.raises(ValueError, match="TrainConfig.use_sde"):
-        TrainConfig(algo="sac", use_sde=True)
-    with pytest.raises(ValueError, match="TrainConfig.sde_sample_freq"):
-        TrainConfig(sde_sample_freq=8)  # without use_sde
-    with pytest.raises(ValueError, match="TrainConfig.sde_sample_freq"):
-        TrainConfig(use_sde=True, sde_sample_freq=0)
+    saved = json.loads((tmp_path / "config.json").read_text())
+    (tmp_path / "config.json").write_text(json.dumps({**saved, "residual_until_held": True}))
+    with pytest.raises(PolicyFileError, match="residual_until_held.*removed on 2026-12-06"):
+        PolicyActor(tmp_path / "model.zip")
+    with pytest.raises(ValueError, match="TrainConfig.use_sde=True: removed on 2026-12-06"):
+        TrainConfig.from_dict({**saved, "use_sde": True})
+    assert TrainConfig.from_dict({**saved, "use_sde": False}) == cfg  # an older run's record, at the default
 
 
 def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
@@ -355,21 +225,53 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
         assert (out / "best" / "config.json").read_text() == (out / "config.json").read_text()
 
 
-@pytest.mark.parametrize("flag", [["--pregrasp-start", "0.5"], ["--pregrasp-anneal"],
-                                  ["--init-model", "runs/x/model.zip"], ["--learning-rate-final", "1e-5"],
-                                  ["--learning-rate-by-wall"], ["--residual-until-held"],
-                                  ["--critic-warmup-steps", "1000"],
-                                  ["--residual-approach-only"], ["--vec-env", "dummy"], ["--flat-observation"],
-                                  ["--gamma", "0.999"], ["--trigger-log-std", "-1.6"],
-                                  ["--trigger-log-std-final", "-3"], ["--time-limit-terminal"],
-                                  ["--use-sde"], ["--sde-sample-freq", "250"], ["--residual-trigger-only"]],
-                         ids=lambda f: f[0])
-def test_the_bc_recipe_refuses_rl_only_options_by_name(capsys, flag):
+def _train_policy_command(argv, capsys):
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="cmd"))
-    a = parser.parse_args(["train-policy", "--recipe", "bc", *flag])
-    assert a.func(a) == 2
-    assert flag[0] in capsys.readouterr().out
+    a = parser.parse_args(["train-policy", *argv])
+    code = a.func(a)
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["pick_policy", "--steps", "5"], "--steps: a bc recipe has no total_steps"),
+    (["pick_policy", "--init-model", "runs/x/model.zip"], "--init-model: a bc recipe has no init_model"),
+    (["ppo", "--demos", "sms3d/pick-v1/x-v0"], "--demos: an rl recipe has no demos"),
+    (["ppo", "--num-mushrooms", "10", "25"], "--num-mushrooms: an rl recipe trains on one bed size"),
+    (["ppo", "--hyperparams", "lr=1e-3"], "--hyperparams: no field lr in an rl recipe"),
+    (["ppo", "--hyperparams", "learning_rate"], "--hyperparams 'learning_rate': must be KEY=VALUE"),
+    (["ppo", "--hyperparams", "learning_rate=2"], "--hyperparams: TrainConfig.learning_rate must be in (0, 1)"),
+    (["pick_policy", "--hyperparams", "epochs=0"], "--hyperparams: BCConfig.epochs must be an integer >= 1"),
+    (["--recipe", "bc", "--demo-episodes", "0"], "--demo-episodes: BCConfig.episodes must be"),
+    ([], "name a recipe"),
+    (["no-such-recipe"], "no recipe file no-such-recipe (shipped recipes: descend_trigger, pick_policy, ppo)"),
+    (["descend_trigger"], "a trigger-rollouts recipe; sms3d train-trigger trains it"),
+    (["ppo", "--use-sde"], "--use-sde: removed on 2026-12-06"),
+    (["--recipe", "residual", "--residual-until-held", "--trigger-log-std", "-1"],
+     "--residual-until-held, --trigger-log-std: removed on 2026-12-06"),
+], ids=lambda v: v if isinstance(v, str) else " ".join(v))
+def test_train_policy_refuses_what_its_recipe_cannot_use_by_name(capsys, argv, flag):
+    code, out, _ = _train_policy_command(argv, capsys)
+    assert code == 2 and flag in out, out
+
+
+def test_deprecated_train_policy_flags_still_set_their_field_with_a_dated_warning(monkeypatch, capsys):
+    """The flags that set a field before recipes were data still work for one release: the same
+    config as the recipe with ``--hyperparams``, and a warning naming the date and the field."""
+    from sms3d_env.training import cli as training_cli
+
+    made = []
+    monkeypatch.setattr(training_cli, "train_policy", lambda cfg, overwrite: made.append(cfg) or {"ok": True})
+    old = ["--conf-file", "ppo", "--learning-rate", "1e-3", "--gamma", "0.95", "--normalize", "--out", "runs/a"]
+    new = ["ppo", "--hyperparams", "learning_rate=1e-3", "gamma=0.95", "normalize=true", "--out", "runs/a"]
+    code, _, err = _train_policy_command(old, capsys)
+    assert code == 0
+    assert "--learning-rate is deprecated on 2026-12-06" in err and "--hyperparams learning_rate=VALUE" in err
+    assert "--conf-file is deprecated on 2026-12-06" in err
+    assert _train_policy_command(new, capsys)[0] == 0
+    assert made[0] == made[1] and made[0].learning_rate == 1e-3 and made[0].gamma == 0.95
+    assert made[0].total_steps == 8_000_000  # the recipe's, untouched
 
 
 def test_the_learning_rate_falls_linearly_to_its_final_value(tmp_path):
@@ -415,23 +317,30 @@ def test_eval_rejects_bad_arguments(tmp_path):
         evaluate_policy_success(tmp_path / "missing.zip", episodes=0)
 
 
-def test_cli_registers_subcommands():
+def test_cli_registers_subcommands(capsys):
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers(dest="cmd"))
-    a = parser.parse_args(["train-policy", "--algo", "sac", "--steps", "300", "--n-envs", "2",
-                           "--pose-error-deg", "10", "--out", "runs/x", "--seed", "3",
-                           "--num-mushrooms", "8", "--eval-episodes", "4"])
-    assert (a.algo, a.steps, a.n_envs, a.pose_error_deg, a.seed, a.num_mushrooms, a.eval_episodes) == \
-        ("sac", 300, 2, 10.0, 3, 8, 4)
+    a = parser.parse_args(["train-policy", "ppo", "--steps", "300", "--n-envs", "2", "--pose-error-deg", "10",
+                           "--out", "runs/x", "--seed", "3", "--num-mushrooms", "8", "--eval-episodes", "4"])
+    assert (a.recipe, a.steps, a.n_envs, a.pose_error_deg, a.seed, a.num_mushrooms, a.eval_episodes) == \
+        ("ppo", 300, 2, 10.0, 3, [8], 4)
     assert callable(a.func)
     b = parser.parse_args(["eval-policy", "--model", "m.zip", "--eval-episodes", "30",
                            "--pose-error-deg", "30"])
     assert (b.episodes, b.pose_error_deg) == (30, 30.0) and callable(b.func)
-    bad = parser.parse_args(["train-policy", "--n-envs", "0"])
+    bad = parser.parse_args(["train-policy", "ppo", "--n-envs", "0"])
     assert bad.func(bad) == 2
-    for flag in ("--residual-until-held", "--residual-trigger-only"):
-        not_residual = parser.parse_args(["train-policy", flag])
-        assert not_residual.func(not_residual) == 2
+    assert "--n-envs: TrainConfig.n_envs must be an integer >= 1" in capsys.readouterr().out
+
+
+def test_train_policy_keeps_the_flags_a_user_sets_by_hand():
+    """Recipes are data: ``--help`` lists at most 25 flags (the rest is the recipe's, or
+    ``--hyperparams``)."""
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="cmd"))
+    train = parser._subparsers._group_actions[0].choices["train-policy"]
+    shown = [a for a in train._actions if a.help != argparse.SUPPRESS and a.option_strings]
+    assert len(shown) <= 25, [a.option_strings for a in shown]
 
 
 def test_module_main_eval_policy(ppo_run, tmp_path, capsys):
@@ -571,10 +480,10 @@ def test_a_run_cannot_start_from_a_model_of_the_other_observation_layout(ppo_run
         train_policy(cfg)
 
 
-def test_a_trigger_residual_cannot_start_from_a_model_without_the_trigger(ppo_run, tmp_path):
-    out, _ = ppo_run  # 7 actions, no trigger
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, residual_descend_trigger=True,
-                      normalize=True, total_steps=128, n_steps=128, batch_size=64,
-                      init_model=str(out / "model.zip"), out=str(tmp_path), **FAST)
-    with pytest.raises(InitModelError, match="without the residual's descend trigger.*residual_descend_trigger=False"):
+def test_a_run_cannot_start_from_the_learned_descend_trigger(tmp_path):
+    from sms3d_env.training.actor import SHIPPED_TRIGGER
+
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v1", residual_scale=0.5, normalize=True, total_steps=128,
+                      init_model=str(SHIPPED_TRIGGER), out=str(tmp_path), **FAST)
+    with pytest.raises(InitModelError, match="is a learned descend trigger"):
         train_policy(cfg)

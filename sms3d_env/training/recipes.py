@@ -1,0 +1,151 @@
+"""Training recipes as data: a YAML file says what ``sms3d train-policy RECIPE`` trains, and a
+run's ``config.json`` records the same fields.
+
+Two forms are read (the shipped recipes are ``sms3d_env/recipes/<name>.yml``):
+
+- an **RL Baselines3 Zoo hyperparameter file**, keyed by env id (``ppo.yml``), which
+  ``python -m rl_zoo3.train`` reads too; its keys map onto :class:`TrainConfig` fields as
+  :func:`~sms3d_env.training.zoo.recipe_fields` says. Kind ``rl``.
+- a **config mapping**: ``recipe:`` (``rl``, ``residual`` or ``bc``) and the fields of the
+  kind's config class, :class:`TrainConfig` (``rl``, ``residual``) or
+  :class:`~sms3d_env.training.imitation.BCConfig` (``bc``), by their names — the keys a run's
+  ``config.json`` holds (``pick_policy.yml`` equals the shipped policy's).
+
+A recipe's fields may then be replaced one by one (:meth:`Recipe.with_fields`: the command's
+flags and ``--hyperparams KEY=VALUE``); every field is checked as the config class checks it,
+and a key that is no field of the kind is a :class:`RecipeError` naming the file and the key.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+from sms3d_env.training.config import REMOVED_FIELDS, TrainConfig
+from sms3d_env.training.zoo import RecipeError, read_zoo_yaml, recipe_fields, recipe_path
+
+#: What ``sms3d train-policy`` trains: PPO/SAC from scratch, a residual on the scripted picker,
+#: or behaviour cloning of the scripted picker with DAgger. ``sms3d train-trigger`` trains the
+#: fourth kind, ``trigger-rollouts`` (:mod:`~sms3d_env.training.trigger_rollouts`).
+KINDS = ("rl", "residual", "bc")
+TRIGGER_KIND = "trigger-rollouts"
+#: How messages name a recipe of each kind ("an rl recipe").
+ARTICLES = {"rl": "an", "residual": "a", "bc": "a", TRIGGER_KIND: "a"}
+#: Keys of a run's ``config.json`` that the trainer derives from the fields (or fixes) rather than
+#: reads: a ``config.json`` is a recipe of its run, and these are skipped.
+RECORD_ONLY_KEYS = {"rl": ("env_options", "observation_keys"), "residual": ("env_options", "observation_keys"),
+                    "bc": ("env_options", "algo", "env_id", "max_episode_steps"),
+                    TRIGGER_KIND: ("env_options", "algo", "env_id", "max_episode_steps", "residual_scale",
+                                   "residual_descend_trigger", "residual_trigger_only")}
+
+
+def _config_class(kind: str) -> type:
+    if kind == "bc":
+        from sms3d_env.training.imitation import BCConfig
+
+        return BCConfig
+    if kind == TRIGGER_KIND:
+        from sms3d_env.training.trigger_rollouts import TriggerConfig
+
+        return TriggerConfig
+    return TrainConfig
+
+
+def field_names(kind: str) -> tuple[str, ...]:
+    """The fields a recipe of ``kind`` sets (its config class's)."""
+    return tuple(f.name for f in fields(_config_class(kind)))
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A training recipe: its ``kind`` (:data:`KINDS`), the file it came from (``None``: the
+    kind's defaults) and the config it makes (``TrainConfig`` or ``BCConfig``)."""
+
+    kind: str
+    source: str
+    config: Any
+
+    def with_fields(self, values: Mapping[str, Any], origin: str) -> Recipe:
+        """This recipe with ``values`` (field name → value) replacing its own; ``RecipeError``
+        naming ``origin`` (what gave them, e.g. ``--hyperparams``) and the field when one is no
+        field of this kind or has a value its config class refuses."""
+        names = field_names(self.kind)
+        unknown = sorted(set(values) - set(names))
+        if unknown:
+            raise RecipeError(f"{origin}: no field {', '.join(unknown)} in {ARTICLES[self.kind]} {self.kind} recipe "
+                              f"(its fields: {', '.join(names)})")
+        try:
+            return replace(self, config=replace(self.config, **values))
+        except (TypeError, ValueError) as exc:
+            raise RecipeError(f"{origin}: {exc}") from None
+
+
+def default_recipe(kind: str) -> Recipe:
+    """The kind's defaults: its config class's, with a residual on ``SMS3DPickTrain-v1``, its
+    observations standardised and its policy's noise at exp(-1.6) ≈ 0.2 (a residual starts
+    near the scripted picker)."""
+    if kind not in (*KINDS, TRIGGER_KIND):
+        raise RecipeError(f"recipe kind {kind!r}: must be one of {', '.join((*KINDS, TRIGGER_KIND))}")
+    if kind == "residual":
+        config = TrainConfig(env_id="SMS3DPickTrain-v1", normalize=True, residual_scale=0.5, log_std_init=-1.6)
+    else:
+        config = _config_class(kind)()
+    return Recipe(kind, f"the {kind} defaults", config)
+
+
+def read_recipe(name_or_path: str | Path) -> Recipe:
+    """A shipped recipe by name (``"ppo"``, ``"pick_policy"``, ``"descend_trigger"``) or a recipe
+    file (either form; a run's ``config.json`` is one);
+    ``FileNotFoundError`` naming it when there is neither, ``RecipeError`` naming the file and
+    key for anything it cannot follow."""
+    path = recipe_path(name_or_path)
+    data = read_zoo_yaml(path)
+    if "recipe" not in data:  # an RL Zoo hyperparameter file
+        _, values = recipe_fields(path)
+        try:
+            return Recipe("rl", str(path), TrainConfig(**values))
+        except ValueError as exc:
+            raise RecipeError(f"{path}: {exc}") from None
+    kind = data.pop("recipe")
+    if kind not in (*KINDS, TRIGGER_KIND):
+        raise RecipeError(f"{path}: recipe: must be one of {', '.join((*KINDS, TRIGGER_KIND))}, got {kind!r}")
+    values = {k: v for k, v in data.items() if k not in RECORD_ONLY_KEYS[kind]}
+    for name in sorted(set(values) & set(REMOVED_FIELDS)):
+        if values.pop(name) not in (None, False, 0, -1):  # a run's config.json records them at their defaults
+            raise RecipeError(f"{path}: {name}: {REMOVED_FIELDS[name]}")
+    recipe = default_recipe(kind).with_fields(values, str(path))
+    if (kind == "residual") != (getattr(recipe.config, "residual_scale", 0.0) > 0):
+        raise RecipeError(f"{path}: residual_scale: must be > 0 for a residual recipe and 0 for an rl one")
+    return replace(recipe, source=str(path))
+
+
+def parse_field_value(text: str) -> Any:
+    """A ``--hyperparams`` value as YAML reads it (``[64, 64]``, ``true``, ``null``), with
+    numbers in exponent notation (``3e-4``, which YAML 1.1 leaves a string) as numbers."""
+    import yaml
+
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    if isinstance(value, str):
+        for number in (int, float):
+            try:
+                return number(value)
+            except ValueError:
+                pass
+    return value
+
+
+def parse_hyperparams(items: list[str]) -> dict[str, Any]:
+    """``["learning_rate=1e-4", "net_arch=[64, 64]"]`` as a mapping; ``RecipeError`` naming an
+    item without ``=``."""
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise RecipeError(f"--hyperparams {item!r}: must be KEY=VALUE (e.g. learning_rate=1e-4)")
+        out[key.strip()] = parse_field_value(text.strip())
+    return out

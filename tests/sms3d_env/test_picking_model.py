@@ -1,0 +1,145 @@
+"""The picking model's rules (``sms3d_env.picking_model``) called directly on crafted worlds and
+states: roots under gravity, bruising above ``bruise_force``, neighbours disturbed beyond
+``disturb_tolerance``, the target's lift, and the order of the failure causes."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+
+import generator
+from sms3d_env.gantry import GantryConfig
+from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.picking_model import FAILURE_CAUSES, REACHED_DISTANCE, PickingModel
+from sms3d_env.world import World
+
+SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
+
+
+def test_mushrooms_stay_rooted_under_gravity_and_small_push():
+    env = gym.make("SMS3DPick-v0", scene=SMALL).unwrapped
+    env.reset(seed=0)
+    start = env.data.xpos[env.world.body_ids].copy()
+    for _ in range(25):  # 1 s with the arm still
+        env.step(np.zeros(7, np.float32))
+    assert np.linalg.norm(env.data.xpos[env.world.body_ids] - start, axis=1).max() < 0.002
+    assert all(env.data.eq_active[env.world.root_eq[env.world.root_eq >= 0]])
+    # A small push (0.3 N) on every mushroom for 0.5 s does not uproot any.
+    for _ in range(250):
+        env.data.xfrc_applied[env.world.body_ids, 0] = 0.3
+        mujoco.mj_step(env.model, env.data)
+        env.picking.after_substep()
+    assert all(env.data.eq_active[env.world.root_eq[env.world.root_eq >= 0]])
+    assert np.linalg.norm(env.data.xpos[env.world.body_ids] - start, axis=1).max() < 0.005
+
+
+def _move(world: World, k: int, offset: np.ndarray) -> None:
+    """Translate free mushroom ``k`` by ``offset`` (m, world) and redo the kinematics."""
+    m, d = world.model, world.data
+    qadr = m.jnt_qposadr[m.body_jntadr[world.body_ids[k]]]
+    d.qpos[qadr : qadr + 3] += offset
+    mujoco.mj_kinematics(m, d)
+
+
+def _largest_cap_force(world: World, k: int) -> float:
+    """The largest contact normal force on mushroom ``k``'s cap in ``world.data.contact`` (N)."""
+    m, d = world.model, world.data
+    f6 = np.zeros(6)
+    forces = [0.0]
+    for c in range(d.ncon):
+        if world.cap_geoms[k] in d.contact.geom[c]:
+            mujoco.mj_contactForce(m, d, c, f6)
+            forces.append(abs(f6[0]))
+    return max(forces)
+
+
+@pytest.mark.parametrize("threshold_share, bruised", [(0.9, True), (1.1, False)])
+def test_a_cap_pressed_harder_than_the_bruise_force_is_bruised(make_world, upright, threshold_share, bruised):
+    world = make_world(GantryConfig())
+    d = world.data
+    # The gantry's cup face 3 mm into the target's cap top: rails over it, the lift lowered.
+    home_site = d.site_xpos[world.tool_site].copy()
+    cap_top = d.site_xpos[world.cap_top_sites[upright]]
+    d.qpos[world.arm_qadr[:3]] += cap_top - home_site - [0.0, 0.0, 0.003]
+    mujoco.mj_forward(world.model, d)
+    press = _largest_cap_force(world, upright)
+    assert press > 0.5  # a real press, not a graze
+    model = PickingModel(world, PickPhysicsParams(bruise_force=threshold_share * press), upright, True)
+    model.after_substep()
+    assert model.state.bruised == ({upright} if bruised else set())
+    assert (model.failure_cause() == "bruised") is bruised
+
+
+@pytest.mark.parametrize("tolerance_share, disturbed", [(0.9, False), (1.1, True)])
+def test_a_neighbour_moved_further_than_the_tolerance_is_disturbed(make_world, upright, tolerance_share,
+                                                                   disturbed):
+    world = make_world(GantryConfig())
+    params = PickPhysicsParams()
+    model = PickingModel(world, params, upright, True)
+    model.settled()
+    neighbour = next(int(k) for k in world.free_ids if k != upright)
+    _move(world, neighbour, tolerance_share * params.disturb_tolerance * np.array([0.6, 0.0, 0.8]))
+    _move(world, upright, np.array([0.0, 0.0, 0.05]))  # the target's own motion disturbs nothing
+    model.after_step()
+    assert model.state.disturbed == ({neighbour} if disturbed else set())
+    assert model.lift() == pytest.approx(0.05)
+    assert model.state.max_lift == pytest.approx(0.05)
+
+
+def test_a_detached_neighbour_is_disturbed_where_it_stands(make_world, upright):
+    world = make_world(GantryConfig())
+    model = PickingModel(world, PickPhysicsParams(), upright, True)
+    model.settled()
+    neighbour = next(int(k) for k in world.free_ids if k != upright)
+    model.state.detached |= {neighbour, upright}
+    model.after_step()
+    assert model.state.disturbed == {neighbour}
+
+
+# Episode states ("target" and "neighbour" stand for those mushrooms) and the cause each
+# reports: where an episode broke several rules, the cause ``failure_cause`` checks first.
+CAUSES = [
+    ({}, "not_reached"),
+    ({"closest_approach": REACHED_DISTANCE}, "no_seal"),
+    ({"closest_approach": REACHED_DISTANCE, "disturbed": {"neighbour"}}, "neighbour_disturbed"),
+    ({"ever_gripped_target": True}, "not_detached"),
+    ({"ever_gripped_target": True, "target_detached": True, "disturbed": {"neighbour"}},
+     "neighbour_disturbed"),
+    ({"ever_gripped_target": True, "target_detached": True, "grip": "target"}, "timeout"),  # not lifted
+    ({"ever_gripped_target": True, "target_detached": True, "grip_lost": True}, "grip_lost"),
+    ({"ever_gripped_target": True, "grip_lost": True, "bruised": {"neighbour"}}, "bruised"),
+    ({"bruised": {"target"}, "reachable": False}, "unreachable"),
+    ({"reachable": False, "unstable": True}, "unstable_simulation"),
+]
+
+
+@pytest.mark.parametrize("fields, cause", CAUSES)
+def test_the_failure_cause_names_the_first_rule_the_episode_broke(make_world, upright, fields, cause):
+    world = make_world(GantryConfig())
+    model = PickingModel(world, PickPhysicsParams(), upright, True)
+    model.settled()
+    ids = {"target": upright, "neighbour": next(int(k) for k in world.free_ids if k != upright)}
+    for name, value in fields.items():
+        value = {ids[v] for v in value} if isinstance(value, set) else ids.get(value, value)
+        setattr(model.state, name, value)
+    assert cause in FAILURE_CAUSES
+    info = model.evaluate()
+    assert (model.failure_cause(), info["failure_cause"], info["is_success"]) == (cause, cause, False)
+
+
+@pytest.mark.parametrize("bruised", [False, True])
+def test_success_is_the_target_detached_held_lifted_and_unbruised(make_world, upright, bruised):
+    world = make_world(GantryConfig())
+    params = PickPhysicsParams()
+    model = PickingModel(world, params, upright, True)
+    model.settled()
+    ep = model.state
+    ep.ever_gripped_target, ep.target_detached, ep.grip = True, True, upright
+    ep.bruised = {upright} if bruised else set()
+    _move(world, upright, np.array([0.0, 0.0, 0.99 * params.lift_height]))
+    assert not model.success()
+    _move(world, upright, np.array([0.0, 0.0, 0.02 * params.lift_height]))
+    assert model.success() is not bruised
+    assert model.failure_cause() == ("bruised" if bruised else None)

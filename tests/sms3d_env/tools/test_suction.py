@@ -1,0 +1,136 @@
+"""The suction tool's rules (``sms3d_env.tools.suction``): the seal rule ``Suction.seals`` (the cup
+axis against the cap normal at the contact, ``PickPhysicsParams.seal_angle_deg``, and the
+contact's distance from the stem axis, ``seal_region`` of the cap radius, on a v1 world with the
+cup at home, pointing down), the valve and its grip weld, the seal's load (``grip_wrench``) and
+the dead ends."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import generator
+import sms3d_env  # noqa: F401  (registers the ids)
+from sms3d_env.episode_state import EpisodeState
+from sms3d_env.gantry import GantryConfig
+from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.tools import Suction
+
+
+@pytest.fixture(scope="module")
+def cup():
+    env = gym.make("SMS3DPick-v1", scene=generator.SceneConfig().replace(placement__num_mushrooms=6))
+    env.reset(seed=0)
+    picking = env.unwrapped.picking
+    yield picking.tool, picking.world, picking.params, picking.state.target
+    env.close()
+
+
+def _tool_axis(world) -> np.ndarray:
+    return world.data.site_xmat[world.tool_site].reshape(3, 3)[:, 2].copy()
+
+
+def _tilted(axis: np.ndarray, degrees: float) -> np.ndarray:
+    """``axis`` turned by ``degrees`` about a direction perpendicular to it."""
+    side = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    a = np.deg2rad(degrees)
+    return np.cos(a) * axis + np.sin(a) * side
+
+
+def _on_cap(world, k: int, radial: float) -> np.ndarray:
+    """A point on mushroom ``k``'s stem axis 2 cm above its body origin, moved ``radial`` metres
+    across the axis."""
+    d = world.data
+    b = world.body_ids[k]
+    axis = d.xmat[b].reshape(3, 3)[:, 2]
+    across = _tilted(axis, 90.0)
+    return d.xpos[b] + 0.02 * axis + radial * across
+
+
+@settings(max_examples=60, deadline=None)
+@given(angle=st.floats(0.0, 89.0))
+def test_a_seal_forms_only_within_the_seal_angle(cup, angle):
+    suction, world, params, target = cup
+    if abs(angle - params.seal_angle_deg) < 1e-6:
+        return  # the boundary itself is a matter of rounding
+    normal = _tilted(_tool_axis(world), angle)
+    sealed = suction.seals(target, _on_cap(world, target, 0.0), normal)
+    assert sealed == (angle < params.seal_angle_deg)
+
+
+@pytest.mark.parametrize("share, seals", [(0.0, True), (0.9, True), (1.1, False), (2.0, False)])
+def test_a_seal_forms_only_on_the_cap_top(cup, share, seals):
+    """Within ``seal_region`` x the cap radius of the stem axis, with the cup square to the cap."""
+    suction, world, params, target = cup
+    radial = share * params.seal_region * world.cap_radius[target]
+    assert suction.seals(target, _on_cap(world, target, radial), _tool_axis(world)) == seals
+
+
+@pytest.mark.parametrize("latched", [False, True])
+def test_an_off_command_releases_the_seal_unless_the_valve_is_latched(make_world, upright, latched):
+    world = make_world(GantryConfig())
+    state = EpisodeState(target=upright)
+    suction = Suction(world, PickPhysicsParams(), state, latched)
+    open_cup = world.cup_mask
+    assert suction.command(1.0)
+    suction.grip(upright)
+    assert state.grip == upright and state.ever_gripped_target
+    assert world.data.eq_active[world.grip_eq[upright]]
+    # While sealed, the weld is the cup-cap interface: the cup face touches no mushroom.
+    assert world.model.geom_conaffinity[world.cup_geom] == 0
+    assert suction.command(-1.0) is latched
+    assert (state.grip == upright) is latched
+    assert bool(world.data.eq_active[world.grip_eq[upright]]) is latched
+    if not latched:
+        m = world.model
+        assert (m.geom_contype[world.cup_geom], m.geom_conaffinity[world.cup_geom]) == open_cup
+
+
+@pytest.mark.parametrize("latched, grip_on, detached, dead", [
+    (False, "target", True, False),     # detached and held: the pick goes on
+    (False, "none", True, True),        # knocked off its roots, not held
+    (False, "neighbour", False, False),  # a seal on a neighbour can still be let go
+    (True, "neighbour", False, True),   # ... unless the valve is latched
+    (True, "target", False, False),
+    (False, "none", False, False),
+])
+def test_a_dead_end_is_a_target_knocked_off_or_a_latched_seal_on_a_neighbour(make_world, upright, latched, grip_on,
+                                                                             detached, dead):
+    world = make_world(GantryConfig())
+    neighbour = (upright + 1) % len(world.body_ids)
+    grip = {"target": upright, "neighbour": neighbour, "none": -1}[grip_on]
+    state = EpisodeState(target=upright, grip=grip, target_detached=detached)
+    assert Suction(world, PickPhysicsParams(), state, latched).dead_end() is dead
+
+
+def test_env_grip_wrench_is_about_the_cup_contact():
+    """A detached mushroom held by the cup alone, with a known extra load: the env's seal reading
+    is the weight plus the load, and its moment is taken about the cup face, not the stem base."""
+    cfg = generator.SceneConfig().replace(placement__num_mushrooms=4)
+    env = gym.make("SMS3DPick-v0", scene=cfg).unwrapped
+    env.reset(seed=0)
+    m, d = env.model, env.data
+    k = env.picking.state.target
+    b = env.world.body_ids[k]
+    d.eq_active[env.world.root_eq[k]] = 0  # detached, and moved up to the cup
+    qadr = m.jnt_qposadr[m.body_jntadr[b]]
+    d.qpos[qadr : qadr + 3] += d.site_xpos[env.world.tool_site] - d.site_xpos[env.world.cap_top_sites[k]]
+    mujoco.mj_forward(m, d)
+    env.picking.tool.grip(k, d.site_xpos[env.world.tool_site].copy())  # sealed where the cup is now
+    m.body_gravcomp[b] = 0.0
+    f_app = np.array([0.1, 0.05, -0.2])
+    d.xfrc_applied[b, :3] = f_app
+    for _ in range(1500):
+        mujoco.mj_step(m, d)
+    mujoco.mj_forward(m, d)
+    force, moment, z = env.picking.tool.grip_wrench()
+    load = f_app + m.body_subtreemass[b] * m.opt.gravity
+    np.testing.assert_allclose(force, -load, atol=2e-3)
+    pc = d.site_xpos[env.world.tool_site]
+    np.testing.assert_allclose(moment, -np.cross(d.xipos[b] - pc, load), atol=2e-4)
+    np.testing.assert_allclose(z, d.site_xmat[env.world.tool_site].reshape(3, 3)[:, 2])

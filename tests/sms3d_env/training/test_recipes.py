@@ -1,0 +1,86 @@
+"""Recipes as data: the shipped recipe files make the configs of the shipped artefacts, a run's
+``config.json`` is a recipe of that run, and values given by hand are read as the recipe reads them."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from sms3d_env.training import BCConfig, TrainConfig
+from sms3d_env.training.recipes import (
+    default_recipe,
+    parse_field_value,
+    parse_hyperparams,
+    read_recipe,
+)
+from sms3d_env.training.zoo import RECIPES_DIR, RecipeError
+
+WEIGHTS = Path(__file__).parents[3] / "sms3d_env" / "weights"
+
+
+def test_the_pick_policy_recipe_is_the_shipped_policys_config():
+    """``sms3d train-policy pick_policy`` trains what the shipped policy's config.json records
+    (all but the run folder it was made in)."""
+    recipe = read_recipe("pick_policy")
+    saved = json.loads((WEIGHTS / "pick_policy" / "config.json").read_text())
+    assert recipe.kind == saved["recipe"] == "bc"
+    from_saved = read_recipe(WEIGHTS / "pick_policy" / "config.json").config  # absent fields: their defaults
+    assert from_saved == BCConfig(**{**asdict(recipe.config), "out": saved["out"]})
+    assert saved["episodes"] == recipe.config.episodes == 600
+
+def test_the_descend_trigger_recipe_is_the_shipped_triggers_config():
+    assert read_recipe("descend_trigger").config == read_recipe(WEIGHTS / "descend_trigger" / "config.json").config
+
+
+def test_every_shipped_recipe_reads():
+    names = sorted(p.stem for p in RECIPES_DIR.glob("*.yml"))
+    assert names == ["descend_trigger", "pick_policy", "ppo"]
+    assert {read_recipe(name).kind for name in names} == {"bc", "rl", "trigger-rollouts"}
+
+
+def test_a_config_mapping_recipe_starts_from_its_kinds_defaults(tmp_path):
+    path = tmp_path / "residual.yml"
+    path.write_text("recipe: residual\npose_error_range_deg: [0, 30]\npose_source: noisy\nnet_arch: [64, 64]\n")
+    recipe = read_recipe(path)
+    assert recipe.kind == "residual" and recipe.source == str(path)
+    assert recipe.config == TrainConfig(**{**asdict(default_recipe("residual").config),
+                                          "pose_error_range_deg": (0.0, 30.0), "pose_source": "noisy",
+                                          "net_arch": (64, 64)})
+
+
+@pytest.mark.parametrize("text, named", [
+    ("recipe: imitation\n", "recipe: must be one of rl, residual, bc, trigger-rollouts"),
+    ("recipe: rl\nlr: 0.1\n", "no field lr in an rl recipe"),
+    ("recipe: rl\nresidual_scale: 0.5\n", "residual_scale: must be > 0 for a residual recipe and 0 for an rl one"),
+    ("recipe: bc\nepochs: -1\n", "BCConfig.epochs must be an integer >= 1"),
+    ("recipe: rl\nuse_sde: true\n", "use_sde: removed on 2026-12-06"),
+    ("- a list\n", "not a mapping of settings"),
+    ("recipe: [unclosed\n", "not readable RL Zoo YAML"),
+])
+def test_a_recipe_file_it_cannot_follow_is_refused_naming_the_file_and_key(tmp_path, text, named):
+    path = tmp_path / "bad.yml"
+    path.write_text(text)
+    with pytest.raises(RecipeError, match=str(path).replace(".", r"\.")) as err:
+        read_recipe(path)
+    assert named in str(err.value)
+
+
+@given(st.one_of(st.integers(-10**6, 10**6), st.floats(allow_nan=False, allow_infinity=False, width=32)))
+def test_numbers_given_by_hand_are_read_as_numbers(number):
+    """``--hyperparams learning_rate=3e-4``: a number in any notation is a number (YAML 1.1 reads
+    ``3e-4`` as a string)."""
+    for text in (repr(number), f"{number:e}", str(number)):
+        assert parse_field_value(text) == pytest.approx(number), text
+
+
+def test_hyperparams_read_yaml_values():
+    assert parse_hyperparams(["net_arch=[64, 64]", "learning_rate_final=null", "normalize=true",
+                              "vec_env=dummy"]) == {"net_arch": [64, 64], "learning_rate_final": None,
+                                                    "normalize": True, "vec_env": "dummy"}
+    with pytest.raises(RecipeError, match="must be KEY=VALUE"):
+        parse_hyperparams(["=3"])
