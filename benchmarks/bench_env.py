@@ -1,17 +1,23 @@
 """Speed of SMS3DPick-v1 (or ``--version v0``): env steps/s with random actions and the
 registered 250-step time limit, so the resets it triggers are in the rate (state observations,
 50 mushrooms), reset time, and steps/s with 64 x 64 RGB-D observations; the training id's reset
-with and without a scene pool. Anchor: FetchPickAndPlace-v4 (measure it beside this run with
-bench_fetch.py).
+with and without a scene pool. Anchor: FetchPickAndPlace-v4, measured by bench_fetch.py in its
+own venv; with ``--fetch-python`` this script runs it before and after its own rows and prints
+the ratio.
 
-Usage: python benchmarks/bench_env.py [--steps 500] [--version v1]
+Usage: python benchmarks/bench_env.py [--steps 500] [--version v1] [--fetch-python /tmp/fetchenv/bin/python]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
+import statistics
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -22,18 +28,23 @@ import sms3d_env  # noqa: E402, F401
 
 
 def measure(env_id: str, steps: int, image_obs: bool, n: int, pool: int = 0) -> tuple[float, float]:
-    """Steps/s with random actions (the time limit's resets included) and the mean time of the
-    warm-up resets; ``pool`` > 0 draws beds from a pool of that many, each generated once in the
-    warm-up (as a training run's envs do)."""
+    """Steps/s with random actions (the time limit's resets included) and the median reset time
+    before the timed steps; ``pool`` > 0 draws beds from a pool of that many, every one of them
+    generated and compiled before the timing (as in a long training run, whose envs have drawn
+    each bed of their pool)."""
     from sms3d_env.scene_source import SceneSourceConfig
 
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
     env = gym.make(env_id, scene=SceneSourceConfig(config=cfg, pool=pool), image_obs=image_obs)  # with its time limit
-    t = time.perf_counter()
-    resets = max(3, pool)
-    for s in range(resets):
-        env.reset(seed=s)
-    reset_s = (time.perf_counter() - t) / resets
+    env.reset(seed=0)
+    source = env.unwrapped.scene_source
+    while len(source.pool) < pool:
+        env.reset()
+    times = []
+    for _ in range(max(3, pool)):
+        t = time.perf_counter()
+        env.reset()
+        times.append(time.perf_counter() - t)
     env.action_space.seed(0)
     actions = [env.action_space.sample() for _ in range(steps)]
     t = time.perf_counter()
@@ -43,7 +54,14 @@ def measure(env_id: str, steps: int, image_obs: bool, n: int, pool: int = 0) -> 
             env.reset()
     rate = steps / (time.perf_counter() - t)
     env.close()
-    return rate, reset_s
+    return rate, statistics.median(times)
+
+
+def fetch_rate(python: str) -> float:
+    """FetchPickAndPlace-v4's steps/s, from bench_fetch.py run by ``python`` (its own venv)."""
+    script = Path(__file__).with_name("bench_fetch.py")
+    out = subprocess.run([python, str(script), "--steps", "2000"], capture_output=True, text=True, check=True).stdout
+    return float(re.search(r": (\d+) steps/s", out).group(1))
 
 
 def main() -> None:
@@ -52,7 +70,11 @@ def main() -> None:
     ap.add_argument("--mushrooms", type=int, default=50)
     ap.add_argument("--resets", type=int, default=20)
     ap.add_argument("--version", choices=("v1", "v0"), default="v1")
+    ap.add_argument("--fetch-python", default=None,
+                    help="a python with gymnasium-robotics (bench_fetch.py's venv): measure the anchor before and "
+                         "after this run's rows and print the ratio")
     args = ap.parse_args()
+    fetch = [fetch_rate(args.fetch_python)] if args.fetch_python else []
     env_id, train_id = f"SMS3DPick-{args.version}", f"SMS3DPickTrain-{args.version}"
     rows = []
     rate, reset_s = measure(env_id, args.steps, False, args.mushrooms)
@@ -61,11 +83,23 @@ def main() -> None:
     rows.append(("state obs, 8-bed pool", rate_p, reset_p))
     rate_i, reset_i = measure(env_id, max(50, args.steps // 5), True, args.mushrooms)
     rows.append(("state + 64x64 RGB-D", rate_i, reset_i))
-    print(f"{env_id}, {args.mushrooms} mushrooms, 40 ms/step (20 x 2 ms), random actions, resets included")
-    print(f"{'observation':<22}{'steps/s':>10}{'reset (s)':>12}")
+    if args.fetch_python:
+        fetch.append(fetch_rate(args.fetch_python))
+    from sms3d_env.controller import ControllerConfig
+
+    ctrl = ControllerConfig()
+    print(f"{env_id}, {args.mushrooms} mushrooms, {ctrl.control_dt * 1e3:.0f} ms/step ({ctrl.substeps} x "
+          f"{ctrl.control_dt / ctrl.substeps * 1e3:g} ms), random actions, resets included")
+    print(f"{'observation':<22}{'steps/s':>10}{'reset median (s)':>18}{'x Fetch':>9}")
+    anchor = statistics.mean(fetch) if fetch else None
     for name, r, rs in rows:
-        print(f"{name:<22}{r:>10.0f}{rs:>12.3f}")
-    print("anchor: FetchPickAndPlace-v4 (state); measure it here with bench_fetch.py")
+        ratio = f"{r / anchor:>9.2f}" if anchor else ""
+        print(f"{name:<22}{r:>10.0f}{rs:>18.3f}{ratio}")
+    if anchor:
+        print(f"anchor: FetchPickAndPlace-v4 (state) {fetch[0]:.0f} before, {fetch[1]:.0f} after this run's rows")
+    else:
+        print("anchor: FetchPickAndPlace-v4 (state); measure it here with --fetch-python or bench_fetch.py")
+    sys.stdout.flush()
     print(f"\n{train_id} reset, {args.mushrooms} mushrooms, {args.resets} resets after a warm-up")
     print(f"{'beds':<34}{'reset (s)':>12}")
     for label, pool, kw in (("new bed per reset", 0, {}), ("pool of 8, target random", 8, {"target": "random"})):
