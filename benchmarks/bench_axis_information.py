@@ -1,7 +1,7 @@
 """How much stem-axis information does a camera-model depth view still hold, and how much of it
 does the shipped pose network read?
 
-For each single-mushroom view (``perception.pose.synthetic_views.render_view``, unseen procedural
+For each single-mushroom view (``perception.baselines.point_transformer.synthetic_views.render_view``, unseen procedural
 shapes), its points are fitted to its *own* mesh (the true shape, scale and stretch): the rms
 point-to-mesh distance with the true rotation, and with the true rotation tilted by θ about a
 random axis perpendicular to the stem (the translation re-fitted each time, so a tilt cannot
@@ -26,9 +26,8 @@ import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from perception.pointcloud import MIN_POINTS  # noqa: E402
-from perception.pose.estimator import PoseEstimator  # noqa: E402
-from perception.pose.synthetic_views import (  # noqa: E402
+from perception.baselines.point_transformer.estimator import PoseEstimator  # noqa: E402
+from perception.baselines.point_transformer.synthetic_views import (  # noqa: E402
     CAMERA_FROM_WORLD,
     MeshModel,
     ViewConfig,
@@ -36,6 +35,7 @@ from perception.pose.synthetic_views import (  # noqa: E402
     procedural_mesh_models,
     render_view,
 )
+from perception.pointcloud import MIN_POINTS  # noqa: E402
 
 #: Points per view used in the fit (a random subset; the fit's cost grows with it).
 FIT_POINTS = 300

@@ -24,11 +24,11 @@ import torch
 
 from generator.dataset.readers import read_scene_files, scene_indices
 from generator.dataset.writer import scene_dirname
+from perception.baselines.maskrcnn.model import DetectorConfig, MaskRCNNDetector, build_maskrcnn
+from perception.baselines.point_transformer.estimator import PoseEstimator
 from perception.detection.load import load_detector
-from perception.detection.maskrcnn import DetectorConfig, MaskRCNNDetector, build_maskrcnn
 from perception.evaluation.eval_pipeline import run_scene
 from perception.pipeline import PosePipeline
-from perception.pose.estimator import PoseEstimator
 
 
 def median_ms(fn, repeats: int) -> float:

@@ -20,8 +20,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # runs from a checkout
 
-from perception.pose.estimator import PoseEstimator  # noqa: E402
-from perception.pose.pose_net import PoseNet, PoseNetConfig  # noqa: E402
+from perception.baselines.point_transformer.estimator import PoseEstimator  # noqa: E402
+from perception.baselines.point_transformer.pose_net import PoseNet, PoseNetConfig  # noqa: E402
 
 
 def time_ms(estimator: PoseEstimator, x: torch.Tensor, repeats: int) -> float:

@@ -17,11 +17,11 @@ import argparse
 import numpy as np
 import torch
 
-from perception.pose.data import PointCloudPoseDataset
-from perception.pose.estimator import PoseEstimator
-from perception.pose.pose_net import PoseNetConfig
-from perception.pose.synthetic_views import default_models, generate_samples
-from perception.pose.train import TrainConfig, evaluate, train
+from perception.baselines.point_transformer.data import PointCloudPoseDataset
+from perception.baselines.point_transformer.estimator import PoseEstimator
+from perception.baselines.point_transformer.pose_net import PoseNetConfig
+from perception.baselines.point_transformer.synthetic_views import default_models, generate_samples
+from perception.baselines.point_transformer.train import TrainConfig, evaluate, train
 
 
 def main() -> None:

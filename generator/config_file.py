@@ -70,3 +70,13 @@ def read_config_file(path: str | Path) -> Any:
     except (ValueError, yaml.YAMLError) as exc:
         raise ConfigError(str(path), f"cannot parse configuration: {exc}") from exc
     return {} if data is None else _unique(data, str(path))
+
+
+def parse_config_value(text: str, source: str) -> Any:
+    """One value written as a configuration file would hold it (``1e-4`` a number, ``[0, 1]`` a
+    list, ``true`` a boolean, other words strings), e.g. from a ``--set KEY=VALUE`` flag;
+    ``ConfigError`` naming ``source`` when it does not parse."""
+    try:
+        return _unique(yaml.load(text, Loader=_Loader), source)
+    except yaml.YAMLError as exc:
+        raise ConfigError(source, f"cannot parse {text!r}: {exc}") from exc

@@ -1,11 +1,10 @@
-"""Mushroom pose perception: point clouds, rotation representations, pose networks.
+"""Mushroom perception from one RGB-D image, in two stages.
 
-Stage 2 of the SMS3D pipeline, two ways: an RGB-D crop around each mushroom's mask is mapped by
-the :class:`~perception.pose.axis_cnn.AxisCNN` to its stem axis (the shipped pipeline's default,
-:class:`~perception.pose.axis_cnn.AxisCNNEstimator`), or its point cloud (camera frame, OpenCV
-convention) by a :class:`~perception.pose.pose_net.PoseNet` to a rotation whose third column is
-the stem axis (:class:`~perception.pose.estimator.PoseEstimator`, the paper's Point Transformer).
-:class:`~perception.pipeline.PosePipeline` puts stage 1 and stage 2 together.
+Stage 1 finds each mushroom's mask (the shipped RGB-D segmenter,
+:mod:`perception.detection.rgbd_segmenter`); stage 2 maps an RGB-D crop around each mask to the
+stem axis (the shipped :class:`~perception.pose.axis_cnn.AxisCNNEstimator`).
+:class:`~perception.pipeline.PosePipeline` puts them together and adds the cap top. The SMS3D
+paper's Mask R-CNN and Point Transformer are kept as baselines in :mod:`perception.baselines`.
 """
 
 from perception.errors import CheckpointMismatchError, NoEstimate, PerceptionConfigError

@@ -29,6 +29,30 @@ RUN_FOLDER_HELP = ("run folder (last.pt, best.pt, log.csv, run_settings.json). R
 OVERWRITE_HELP = "empty --out and start anew, instead of resuming its run or refusing other settings"
 
 
+def run_folder_flags(p: argparse.ArgumentParser) -> None:
+    """``--out`` and how a rerun treats the run in it (``generator.run_folder``'s rule), for the
+    training commands that resume."""
+    p.add_argument("--out", required=True, help=RUN_FOLDER_HELP)
+    rerun = p.add_mutually_exclusive_group()
+    rerun.add_argument("--resume", action="store_true",
+                       help="only continue the run in --out: refuse when it holds none (a rerun with the same "
+                            "settings resumes without this flag too)")
+    rerun.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+
+
+def check_out(out: str, resume: bool) -> None:
+    """``--out`` checked before minutes of rendering or cropping, and with ``--resume`` it must
+    hold a run (a rerun resumes without the flag too; with it, a mistyped ``--out`` is refused
+    rather than started afresh)."""
+    from generator.run_folder import SETTINGS_FILE, check_out_path
+    from perception.errors import PerceptionConfigError
+
+    folder = check_out_path(out)
+    if resume and not (folder / SETTINGS_FILE).is_file():
+        raise PerceptionConfigError("--resume", f"{folder} holds no run to resume (no {SETTINGS_FILE}); drop "
+                                                "--resume to start one")
+
+
 def _clear_errors(func):
     """Typed input errors become one line on stderr and exit code 2, not a traceback."""
 
@@ -131,7 +155,6 @@ def _pipeline(args: argparse.Namespace, datasets: Sequence[str]):
     from perception.errors import PerceptionConfigError
     from perception.pipeline import PosePipeline
     from perception.pose.axis_cnn import AxisCNNEstimator
-    from perception.pose.estimator import PoseEstimator
 
     oracle = args.detector == "oracle"
     for flag in ("--soil-margin-mm", "--edge-tolerance-mm"):
@@ -143,6 +166,8 @@ def _pipeline(args: argparse.Namespace, datasets: Sequence[str]):
             estimator = None
             axis_model = AxisCNNEstimator.from_checkpoint(args.weights) if args.weights else AxisCNNEstimator.from_pretrained()
         else:
+            from perception.baselines.point_transformer.estimator import PoseEstimator
+
             estimator = PoseEstimator.from_checkpoint(args.weights) if args.weights else PoseEstimator.from_pretrained()
             axis_model = None
     overrides = {} if args.score_threshold is None else {"score_threshold": args.score_threshold}
@@ -162,8 +187,8 @@ def _pipeline(args: argparse.Namespace, datasets: Sequence[str]):
 
 def cmd_train(args: argparse.Namespace) -> int:
     from generator.run_folder import check_out_path
-    from perception.detection.maskrcnn_config import DetectorConfig, DetectorTrainConfig
-    from perception.detection.train_detector import train_detector
+    from perception.baselines.maskrcnn.config import DetectorConfig, DetectorTrainConfig
+    from perception.baselines.maskrcnn.train import train_detector
 
     check_out_path(args.out)
     check_datasets("--data", [args.data])
@@ -294,7 +319,7 @@ def _add_dataclass_flags(p: argparse.ArgumentParser, cls: type, helps: dict[str,
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    from perception.detection.maskrcnn_config import DetectorConfig, DetectorTrainConfig
+    from perception.baselines.maskrcnn.config import DetectorConfig, DetectorTrainConfig
     from perception.detection.segmenter_config import SegmenterTrainConfig
 
     p = subparsers.add_parser("train-segmenter", help="train the RGB-D segmenter (stage 1) on generated datasets (resumable)")
@@ -305,7 +330,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--overwrite", "--restart", action="store_true", help=f"{OVERWRITE_HELP} (--restart: the same)")
     p.set_defaults(func=_clear_errors(cmd_train_segmenter))
 
-    p = subparsers.add_parser("train-detector", help="train Mask R-CNN on a dataset's COCO files (resumable)")
+    p = subparsers.add_parser("train-detector", help="train the Mask R-CNN baseline on a dataset's COCO files (resumable)")
     _common(p)
     p.add_argument("--out", required=True, help=RUN_FOLDER_HELP)
     net, train = DetectorConfig(), DetectorTrainConfig()  # the flags' defaults are the configs'

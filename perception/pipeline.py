@@ -1,15 +1,16 @@
-"""The two-stage pose pipeline: masks from a detector, then the pose network on each mushroom's
-points. ``(rgb, depth, intrinsics, world_from_camera) -> [MushroomEstimate]``."""
+"""The two-stage pose pipeline: masks from a detector, then each mushroom's stem axis from the
+axis CNN (shipped) or a point network (the baseline) and its cap top from its points.
+``(rgb, depth, intrinsics, world_from_camera) -> [MushroomEstimate]``."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
 from generator.camera import Intrinsics
-from perception.depth_smoothing import smooth_depth_in_mask
 from perception.detection.detector import Detection, Detector
 from perception.errors import NoEstimate, PerceptionConfigError, PipelineInputError
 from perception.pointcloud import (
@@ -20,7 +21,9 @@ from perception.pointcloud import (
     pinhole_intrinsics,
 )
 from perception.pose.axis_cnn import AxisCNNEstimator, rotation_from_axis
-from perception.pose.estimator import PoseEstimator
+
+if TYPE_CHECKING:  # the baseline's estimator is loaded only by those who pass one
+    from perception.baselines.point_transformer.estimator import PoseEstimator
 
 #: The cloud's top along the axis is this percentile of the points' heights (robust to strays).
 CAP_TOP_PERCENTILE = 99.0
@@ -198,7 +201,7 @@ class PosePipeline:
     raised its error with exact masks from 9.2° to 12.5°).
 
     ``depth_smoothing_px`` smooths each mask's depth before its points are taken
-    (:func:`~perception.depth_smoothing.smooth_depth_in_mask`); ``None``, the default, takes it
+    (:func:`~perception.baselines.point_transformer.depth_smoothing.smooth_depth_in_mask`); ``None``, the default, takes it
     from the network (``estimator.config.depth_smoothing_px``): a network is fed as it was trained.
 
     ``axis_model`` (an :class:`~perception.pose.axis_cnn.AxisCNNEstimator`) reads each stem axis
@@ -252,7 +255,11 @@ class PosePipeline:
         sigma = self.depth_smoothing_px
         if sigma is None:
             sigma = self.estimator.config.depth_smoothing_px if self.estimator is not None else 0.0
-        return mask, (smooth_depth_in_mask(depth, mask, sigma) if sigma > 0 else depth)
+        if sigma <= 0:
+            return mask, depth
+        from perception.baselines.point_transformer.depth_smoothing import smooth_depth_in_mask
+
+        return mask, smooth_depth_in_mask(depth, mask, sigma)
 
     @property
     def detector(self) -> Detector | None:

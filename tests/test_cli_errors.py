@@ -38,8 +38,10 @@ CASES = [
     (["eval-pipeline", "--data", "{out}", "--edge-tolerance-mm", "nan"], "--edge-tolerance-mm"),
     (["train-pose", "--out", "{out}", "--scenes", "{out}", "--edge-tolerance-mm", "8"], "--edge-tolerance-mm"),
     (["train-pose", "--out", "{out}", "--edge-tolerance-mm", "8"], "--edge-tolerance-mm"),
-    (["train-pose", "--out", "{out}", "--occlusion-prob", "1.5"], "occlusion_prob"),
-    (["train-pose", "--out", "{out}", "--occlusion-fraction", "0.6", "0.2"], "occlusion_fraction"),
+    (["train-pose", "--out", "{out}", "--set", "train.augment.occlusion_prob=1.5"], "train.augment.occlusion_prob"),
+    (["train-pose", "--out", "{out}", "--set", "train.augment.occlusion_fraction=[0.6, 0.2]"],
+     "train.augment.occlusion_fraction"),
+    (["train-pose", "--out", "{out}", "--recipe", "{config}"], "terrain"),
     (["eval-pipeline", "--data", "{out}", "--detector", "oracle", "--edge-tolerance-mm", "8"], "--edge-tolerance-mm"),
     (["show-estimates", "--data", "{out}", "--detector", "oracle", "--soil-margin-mm", "4"], "--soil-margin-mm"),
 ]

@@ -33,6 +33,29 @@ def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
     return float((a & b).sum() / max((a | b).sum(), 1))
 
 
+def matched_detections(detections: list[Detection], labels: np.ndarray,
+                       min_iou: float = 0.5) -> list[tuple[Detection, int, float]]:
+    """``(detection, instance id, IoU)`` for each detection matched to a ground-truth mushroom of
+    the instance label image ``labels`` (id + 1 per pixel): best score first, each to the
+    not-yet-taken mushroom its mask overlaps best, with visible-mask IoU >= ``min_iou``."""
+    out = []
+    taken: set[int] = set()
+    for det in sorted(detections, key=lambda d: -d.score):
+        candidates = np.unique(labels[det.mask])
+        best, best_iou = None, min_iou
+        for value in candidates[candidates > 0]:
+            iid = int(value) - 1
+            if iid in taken:
+                continue
+            iou = mask_iou(det.mask, labels == value)
+            if iou >= best_iou:
+                best, best_iou = iid, iou
+        if best is not None:
+            taken.add(best)
+            out.append((det, best, best_iou))
+    return out
+
+
 class Detector(Protocol):
     """What stage 1 is: one RGB-D image (``rgb (H, W, 3)`` uint8, ``depth (H, W)`` float metres,
     0 = invalid) to instance detections. RGB-only detectors ignore ``depth``."""

@@ -48,6 +48,6 @@ def load_detector(spec: str | None = "shipped", threads: int | None = None, **ov
         return load_segmenter(path, threads=threads, **overrides)
     except CheckpointFormatError:  # not a segmenter: Mask R-CNN's reader names what else it is
         pass
-    from perception.detection.maskrcnn import MaskRCNNDetector
+    from perception.baselines.maskrcnn.model import MaskRCNNDetector
 
     return MaskRCNNDetector.from_checkpoint(path, **overrides)

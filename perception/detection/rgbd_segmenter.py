@@ -1,6 +1,6 @@
 """An RGB-D instance segmenter for stage 1: a small U-Net with a mask, a centre and an offset head.
 
-Mask R-CNN (``perception.detection.maskrcnn``) sees RGB only and paints 28 × 28 masks that spill
+Mask R-CNN (``perception.baselines.maskrcnn.model``) sees RGB only and paints 28 × 28 masks that spill
 over a mushroom's silhouette onto the soil; trained from scratch on this project's CPU it reached
 mask F1 0.74. This project renders metric depth for every pixel, and a mushroom is a bump on the
 soil, so a bottom-up segmenter on colour *and* depth is a better fit (the design is

@@ -1,3 +1,3 @@
 """Stage 2, pose estimation: per-mushroom RGB-D crops to stem axes (``axis_cnn``,
-``depth_crops``, ``train_axis_cnn``), and per-mushroom point clouds to rotations whose third
-column is the stem axis (networks, rotation heads, training data, training loops, inference)."""
+``depth_crops``, ``train_axis_cnn``, ``widen``), and the rotation representations and losses
+(``rotations``). The paper's point network is a baseline: :mod:`perception.baselines.point_transformer`."""

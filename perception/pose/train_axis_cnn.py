@@ -1,9 +1,9 @@
 """Training the axis CNN (``axis_cnn``) on crops cut out by a stage-1 detector's masks.
 
 ``crops_from_detections`` renders nothing: it reads generated scenes (``sms3d generate``), runs
-the detector, matches its masks to the ground truth (``data.matched_detections``) and crops
-each matched mushroom (``depth_crops``), labelled with its true stem axis in the crop's ray
-frame. The crops of a dataset split are cached in one ``.npz`` (``generator.files.save_npz_atomic``:
+the detector, matches its masks to the ground truth (``detection.detector.matched_detections``)
+and crops each matched mushroom (``depth_crops``), labelled with its true stem axis in the
+crop's ray frame. The crops of a dataset split are cached in one ``.npz`` (``generator.files.save_npz_atomic``:
 written atomically; remade when the split's scenes (by the checksums the generator recorded),
 the detector's weights or the crop layout change).
 
@@ -123,7 +123,7 @@ def crops_from_detections(root: str | Path, split: str | None, detector: Any, pr
     from generator.dataset.readers import read_scene_files, scene_indices
     from generator.dataset.writer import scene_dirname
     from generator.geometry import tilt_angle
-    from perception.pose.data import matched_detections
+    from perception.detection.detector import matched_detections
 
     root = Path(root)
     indices = scene_indices(root, split)

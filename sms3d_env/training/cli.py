@@ -49,7 +49,7 @@ FIELD_FLAGS = {"out": "out", "seed": "seed", "env_id": "env_id", "steps": "total
                "scene_pool": "scene_pool", "pose_error_deg": "pose_error_deg",
                "pose_error_range": "pose_error_range_deg", "init_model": "init_model", "demos": "demos",
                "eval_freq": "eval_freq", "eval_episodes": "eval_episodes", "checkpoint_freq": "checkpoint_freq"}
-#: Flags that set a field before recipes were data, deprecated on 2026-12-06 (removed in 0.3.0):
+#: Flags that set a field before recipes were data, deprecated on 2026-12-06 (removed after 2027-06-06):
 #: flag → (field, argparse keywords). They still work, with a warning naming the replacement.
 DEPRECATED_FIELD_FLAGS: dict[str, tuple[str, dict[str, Any]]] = {
     "--algo": ("algo", {"choices": ALGOS}),
@@ -81,7 +81,7 @@ DEPRECATED_FIELD_FLAGS: dict[str, tuple[str, dict[str, Any]]] = {
 REMOVED_FLAGS = {"--residual-until-held": 0, "--residual-approach-only": 0, "--residual-descend-trigger": 0,
                  "--residual-trigger-only": 0, "--trigger-log-std": 1, "--trigger-log-std-final": 1,
                  "--critic-warmup-steps": 1, "--time-limit-terminal": 0, "--use-sde": 0, "--sde-sample-freq": 1}
-DEPRECATION = "deprecated on 2026-12-06, removed in 0.3.0"
+DEPRECATION = "deprecated on 2026-12-06, removed after 2027-06-06"
 
 
 def _dest(flag: str) -> str:

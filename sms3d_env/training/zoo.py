@@ -236,7 +236,7 @@ def with_recipe(cfg: Any, recipe: str | Path) -> Any:
     import warnings
     from dataclasses import replace
 
-    warnings.warn("sms3d_env.training.with_recipe is deprecated on 2026-12-06 and removed in 0.3.0: use "
+    warnings.warn("sms3d_env.training.with_recipe is deprecated on 2026-12-06 and removed after 2027-06-06: use "
                   "sms3d_env.training.read_recipe(recipe).config, whose fields replace one another by "
                   "Recipe.with_fields", DeprecationWarning, stacklevel=2)
     path = recipe_path(recipe)

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 import torch
 
+from perception.baselines.maskrcnn.model import MaskRCNNDetector
+from perception.baselines.point_transformer.config import PoseNetConfig, TrainConfig
+from perception.baselines.point_transformer.data import PointCloudPoseDataset, PointCloudSample
+from perception.baselines.point_transformer.estimator import default_weights_path
+from perception.baselines.point_transformer.pose_net import load_checkpoint
+from perception.baselines.point_transformer.train import train
 from perception.detection.load import SHIPPED_SEGMENTER, load_detector
-from perception.detection.maskrcnn import MaskRCNNDetector
 from perception.detection.rgbd_segmenter import load_segmenter
 from perception.errors import CheckpointFormatError
 from perception.pose.axis_cnn import SHIPPED_AXIS_CNN, load_axis_cnn
-from perception.pose.config import PoseNetConfig, TrainConfig
-from perception.pose.data import PointCloudPoseDataset, PointCloudSample
 from perception.pose.depth_crops import CROP_CHANNELS, CROP_SIZE
-from perception.pose.estimator import default_weights_path
-from perception.pose.pose_net import load_checkpoint
-from perception.pose.train import train
 from perception.pose.train_axis_cnn import AxisTrainConfig, CropSet, train_axis_cnn
 
 

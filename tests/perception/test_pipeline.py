@@ -6,7 +6,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from generator.camera import project
-from perception.depth_smoothing import smooth_depth_in_mask
+from perception.baselines.point_transformer.depth_smoothing import smooth_depth_in_mask
+from perception.baselines.point_transformer.estimator import PoseEstimator
+from perception.baselines.point_transformer.pose_net import PoseNet, PoseNetConfig
 from perception.detection.detector import Detection, detections_from_labels
 from perception.errors import PerceptionConfigError
 from perception.evaluation.eval_pipeline import GroundTruthMushroom, match
@@ -19,8 +21,6 @@ from perception.pipeline import (
     within_depth_of_core,
 )
 from perception.pointcloud import MIN_POINTS, depth_to_points
-from perception.pose.estimator import PoseEstimator
-from perception.pose.pose_net import PoseNet, PoseNetConfig
 
 
 @pytest.fixture(scope="module")
@@ -322,8 +322,8 @@ def test_match_splits_the_cap_top_error_along_and_across_the_stem():
 def test_eval_pipeline_names_how_its_clouds_are_cut(tmp_path, capsys):
     import argparse
 
+    from perception.baselines.point_transformer.pose_net import save_checkpoint
     from perception.cli_detector import _pipeline
-    from perception.pose.pose_net import save_checkpoint
 
     path = tmp_path / "smoothed.pt"
     save_checkpoint(path, PoseNet(PoseNetConfig(backbone="pointnet", num_points=64, hidden=16, depth_smoothing_px=3.0)))

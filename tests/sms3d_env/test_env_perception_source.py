@@ -8,9 +8,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from perception.baselines.point_transformer.estimator import PoseEstimator
 from perception.detection.detector import detections_from_labels
 from perception.pipeline import PosePipeline
-from perception.pose.estimator import PoseEstimator
 from sms3d_env.pose_sources.perception import PerceptionPose
 
 

@@ -9,12 +9,12 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import pytest
 import torch
 
+from perception.baselines.point_transformer.estimator import PoseEstimator
 from perception.detection.detector import detections_from_labels, mask_iou
 from perception.detection.load import SHIPPED_SEGMENTER, describe_detector, load_detector
 from perception.detection.rgbd_segmenter import RGBDSegmenter
 from perception.pipeline import PosePipeline
 from perception.pose.axis_cnn import SHIPPED_AXIS_CNN
-from perception.pose.estimator import PoseEstimator
 from sms3d_env.pose_sources import PerceptionPose
 
 

@@ -132,8 +132,8 @@ def test_head_registry_is_the_one_table_of_heads() -> None:
     from perception.choices import HEAD_NAMES
 
     assert HEAD_NAMES == tuple(rot.ROTATION_HEADS)
+    from perception.baselines.point_transformer.backbones import BACKBONES
     from perception.choices import BACKBONE_NAMES
-    from perception.pose.backbones import BACKBONES
 
     assert BACKBONE_NAMES == tuple(BACKBONES)  # the same for the backbones
     R = rot.random_rotations(16, torch.Generator().manual_seed(3), dtype=torch.float64)

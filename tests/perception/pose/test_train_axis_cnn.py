@@ -19,10 +19,10 @@ from hypothesis import strategies as st
 from generator.dataset.readers import read_scene_files, scene_indices
 from generator.dataset.writer import scene_dirname
 from generator.run_folder import SETTINGS_FILE, RunFolderError
+from perception.baselines.point_transformer.estimator import default_weights_path
 from perception.detection.detector import detections_from_labels
 from perception.errors import PerceptionConfigError
 from perception.pose.axis_cnn import SHIPPED_AXIS_CNN, AxisCNNConfig, load_axis_cnn
-from perception.pose.estimator import default_weights_path
 from perception.pose.train_axis_cnn import (
     AxisTrainConfig,
     CropSet,

@@ -22,7 +22,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from perception.pose.backbones.ops import (
+from perception.baselines.point_transformer.backbones.ops import (
     farthest_point_sample,
     flat_index,
     gather_points,

@@ -5,10 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from perception.baselines.point_transformer.estimator import (
+    PoseEstimator,
+    default_weights_path,
+    turn_to_camera,
+)
+from perception.baselines.point_transformer.synthetic_views import (
+    ViewConfig,
+    default_models,
+    generate_samples,
+)
 from perception.errors import DegenerateCloud, NoEstimate, PerceptionConfigError, PipelineInputError
 from perception.pointcloud import depth_to_points
-from perception.pose.estimator import PoseEstimator, default_weights_path, turn_to_camera
-from perception.pose.synthetic_views import ViewConfig, default_models, generate_samples
 
 #: Stated tolerance: mean stem-axis error of the shipped network (8 test-time views, the
 #: default) on 40 views of all 14 library models, 20° tilt σ: measured 3.0° (4.7° with one

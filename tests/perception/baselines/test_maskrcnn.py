@@ -13,23 +13,23 @@ import torch
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
 from generator.run_folder import RunFolderError
-from perception.detection.detector import detections_from_labels
-from perception.detection.detector_data import CocoDetectionDataset
-from perception.detection.detector_eval import evaluate_detector
-from perception.detection.maskrcnn import (
+from perception.baselines.maskrcnn.model import (
     DetectorConfig,
     MaskRCNNDetector,
     PretrainedWeightsMissing,
     build_maskrcnn,
     save_detector,
 )
-from perception.detection.train_detector import DetectorTrainConfig, train_detector
+from perception.baselines.maskrcnn.train import DetectorTrainConfig, train_detector
+from perception.baselines.point_transformer.estimator import PoseEstimator
+from perception.baselines.point_transformer.pose_net import PoseNet, PoseNetConfig
+from perception.detection.detector import detections_from_labels
+from perception.detection.detector_data import CocoDetectionDataset
+from perception.detection.detector_eval import evaluate_detector
 from perception.errors import CheckpointFormatError, CheckpointMismatchError, PerceptionConfigError
 from perception.evaluation.eval_pipeline import evaluate_pipeline, run_scene
 from perception.pipeline import PosePipeline
 from perception.plots.show_estimates import estimates_figure
-from perception.pose.estimator import PoseEstimator
-from perception.pose.pose_net import PoseNet, PoseNetConfig
 from sms3d_env.cli import main as cli_main
 
 try:

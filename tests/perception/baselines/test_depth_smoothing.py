@@ -4,7 +4,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from generator.dataset.realism import correlated_unit_noise
-from perception.depth_smoothing import smooth_depth_in_mask
+from perception.baselines.point_transformer.depth_smoothing import smooth_depth_in_mask
 
 
 def _dome(shape=(90, 120), radius=25):

@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 import torch
 
-from perception.pointcloud import prepare_cloud, to_tensor
-from perception.pose.backbones.ops import farthest_point_sample, knn
-from perception.pose.backbones.point_transformer import (
+from perception.baselines.point_transformer.backbones.ops import farthest_point_sample, knn
+from perception.baselines.point_transformer.backbones.point_transformer import (
     PointTransformer,
     PointTransformerBlock,
     PointTransformerLayer,
     TransitionDown,
 )
-from perception.pose.estimator import PoseEstimator
-from perception.pose.synthetic_views import default_models, generate_samples
+from perception.baselines.point_transformer.estimator import PoseEstimator
+from perception.baselines.point_transformer.synthetic_views import default_models, generate_samples
+from perception.pointcloud import prepare_cloud, to_tensor
 
 
 def _gather(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:

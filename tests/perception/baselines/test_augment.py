@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from perception.baselines.point_transformer.augment import AugmentConfig, occlude_points
+from perception.baselines.point_transformer.data import PointCloudPoseDataset, PointCloudSample
 from perception.errors import PerceptionConfigError
 from perception.pointcloud import MIN_POINTS
-from perception.pose.augment import AugmentConfig, occlude_points
-from perception.pose.data import PointCloudPoseDataset, PointCloudSample
 
 
 def _dome(n: int = 2000, seed: int = 0) -> np.ndarray:

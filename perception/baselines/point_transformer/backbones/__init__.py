@@ -7,9 +7,9 @@ from __future__ import annotations
 
 from torch import nn
 
-from perception.pose.backbones.point_transformer import PointTransformer
-from perception.pose.backbones.pointnet import PointNet
-from perception.pose.backbones.pointnet2 import PointNet2
+from perception.baselines.point_transformer.backbones.point_transformer import PointTransformer
+from perception.baselines.point_transformer.backbones.pointnet import PointNet
+from perception.baselines.point_transformer.backbones.pointnet2 import PointNet2
 
 BACKBONES: dict[str, type[nn.Module]] = {
     "point_transformer": PointTransformer,

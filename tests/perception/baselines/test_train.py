@@ -6,17 +6,15 @@ import numpy as np
 import pytest
 import torch
 
-from perception.errors import PerceptionConfigError
-from perception.pose.data import (
+from perception.baselines.point_transformer.data import (
     DatasetFormatError,
     PointCloudPoseDataset,
     PointCloudSample,
     load_samples,
     save_samples,
 )
-from perception.pose.pose_net import PoseNet, PoseNetConfig
-from perception.pose.rotations import CHANCE_AXIS_DEG, CHANCE_GEODESIC_DEG
-from perception.pose.synthetic_views import (
+from perception.baselines.point_transformer.pose_net import PoseNet, PoseNetConfig
+from perception.baselines.point_transformer.synthetic_views import (
     CAMERA_FROM_WORLD,
     ViewConfig,
     default_models,
@@ -24,7 +22,9 @@ from perception.pose.synthetic_views import (
     posed_mesh,
     render_view,
 )
-from perception.pose.train import TrainConfig, evaluate, train
+from perception.baselines.point_transformer.train import TrainConfig, evaluate, train
+from perception.errors import PerceptionConfigError
+from perception.pose.rotations import CHANCE_AXIS_DEG, CHANCE_GEODESIC_DEG
 
 FAST_VIEWS = ViewConfig(tilt_std_deg=45.0, surface_samples=8000)
 
@@ -158,8 +158,8 @@ def test_a_rerun_resumes_from_the_last_checkpoint_and_other_settings_are_refused
 
 
 def test_init_fine_tunes_from_a_checkpoint(tmp_path, models) -> None:
+    from perception.baselines.point_transformer.pose_net import load_checkpoint
     from perception.errors import CheckpointMismatchError
-    from perception.pose.pose_net import load_checkpoint
 
     s = generate_samples(48, 4, models, FAST_VIEWS)
     net = PoseNetConfig(backbone="pointnet", num_points=64)
@@ -193,29 +193,30 @@ def test_cli_train_pose_init(tmp_path, models) -> None:
     save_samples(tmp_path / "tr.npz", s[:32])
     save_samples(tmp_path / "va.npz", s[32:])
     common = ["train-pose", "--data", str(tmp_path / "tr.npz"), "--val-data", str(tmp_path / "va.npz"),
-              "--backbone", "pointnet", "--epochs", "1", "--threads", "1", "--quiet"]
-    assert main([*common, "--out", str(tmp_path / "a"), "--num-points", "64"]) == 0
+              "--epochs", "1", "--threads", "1", "--quiet", "--set", "net.backbone=pointnet"]
+    assert main([*common, "--out", str(tmp_path / "a"), "--set", "net.num_points=64"]) == 0
     init = str(tmp_path / "a" / "best.pt")
-    assert main([*common, "--out", str(tmp_path / "b"), "--num-points", "64", "--init", init]) == 0
-    assert main([*common, "--out", str(tmp_path / "c"), "--num-points", "128", "--init", init]) == 2
-    assert main([*common, "--out", str(tmp_path / "d"), "--num-points", "64", "--init", str(tmp_path / "no.pt")]) == 2
+    assert main([*common, "--out", str(tmp_path / "b"), "--set", "net.num_points=64", "--init", init]) == 0
+    assert main([*common, "--out", str(tmp_path / "c"), "--set", "net.num_points=128", "--init", init]) == 2
+    assert main([*common, "--out", str(tmp_path / "d"), "--set", "net.num_points=64", "--init",
+                 str(tmp_path / "no.pt")]) == 2
 
 
 def test_cli_depth_smoothing_needs_a_detectors_scene_clouds(tmp_path, capsys) -> None:
     from perception.cli_pose import main
 
     base = ["train-pose", "--out", str(tmp_path / "x"), "--epochs", "1", "--quiet"]
-    assert main([*base, "--depth-smoothing-px", "4"]) == 2  # rendered views: no depth image to smooth
-    assert "--depth-smoothing-px needs --scenes" in capsys.readouterr().err
-    assert main([*base, "--depth-smoothing-px", "4", "--scenes", str(tmp_path)]) == 2  # oracle masks
-    assert "--depth-smoothing-px" in capsys.readouterr().err
-    assert main([*base, "--depth-smoothing-px", "-2"]) == 2
-    assert "depth_smoothing_px" in capsys.readouterr().err
+    assert main([*base, "--set", "net.depth_smoothing_px=4"]) == 2  # rendered views: no depth image to smooth
+    assert "net.depth_smoothing_px: needs --scenes" in capsys.readouterr().err
+    assert main([*base, "--set", "net.depth_smoothing_px=4", "--scenes", str(tmp_path)]) == 2  # oracle masks
+    assert "net.depth_smoothing_px: cuts a detector's clouds" in capsys.readouterr().err
+    assert main([*base, "--set", "net.depth_smoothing_px=-2"]) == 2
+    assert "--set: net.depth_smoothing_px: must be a number in [0, 20]" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
 
 
 def test_best_checkpoint_selected_by_axis_error(tmp_path, models) -> None:
-    from perception.pose.pose_net import read_checkpoint
+    from perception.baselines.point_transformer.pose_net import read_checkpoint
 
     s = generate_samples(48, 5, models, FAST_VIEWS)
     net = PoseNetConfig(backbone="pointnet", num_points=64)
@@ -230,7 +231,7 @@ def test_best_checkpoint_selected_by_axis_error(tmp_path, models) -> None:
 
 
 def test_ablation_writes_its_table_and_resumes(models, tmp_path, monkeypatch) -> None:
-    from perception.evaluation import ablation
+    from perception.baselines.point_transformer import ablation
 
     samples = generate_samples(24, seed=8, models=models, config=FAST_VIEWS)
     variants = [ablation.Variant("backbone", PoseNetConfig(backbone="pointnet", num_points=64)),
@@ -278,7 +279,7 @@ def test_camera_model_views_carry_the_stereo_noise_of_the_formula(models) -> Non
 
 
 def test_gaps_in_the_splat_take_the_mushrooms_depth_not_the_soils() -> None:
-    from perception.pose.synthetic_views import _with_soil
+    from perception.baselines.point_transformer.synthetic_views import _with_soil
 
     depth = np.full((9, 9), 0.35)
     valid = np.zeros((9, 9), bool)
@@ -299,16 +300,17 @@ def test_camera_model_views_are_deterministic(models) -> None:
 def test_cli_camera_model_views(tmp_path, capsys) -> None:
     from perception.cli_pose import main
 
-    common = ["--backbone", "pointnet", "--num-points", "64", "--epochs", "1", "--threads", "1", "--quiet",
-              "--model-ids", "0", "--num-train", "12", "--num-val", "4", "--cache", str(tmp_path / "cache")]
-    assert main(["train-pose", "--out", str(tmp_path / "a"), "--camera-model", *common]) == 0
+    common = ["--epochs", "1", "--threads", "1", "--quiet", "--cache", str(tmp_path / "cache"), "--set",
+              "net.backbone=pointnet", "net.num_points=64", "data.model_ids=[0]", "data.num_train=12", "data.num_val=4"]
+    assert main(["train-pose", "--out", str(tmp_path / "a"), *common, "data.camera_model=true"]) == 0
     assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == [
         "train_n12_seed1_models0_camera.npz", "val_n4_seed2_models0_camera.npz"]
     assert main(["eval-pose", "--checkpoint", str(tmp_path / "a" / "best.pt"), "--num", "4", "--model-ids", "0",
                  "--threads", "1", "--camera-model"]) == 0
     capsys.readouterr()
-    assert main(["train-pose", "--out", str(tmp_path / "b"), "--camera-model", "--scenes", str(tmp_path)]) == 2
-    assert "--add-synthetic" in capsys.readouterr().err
+    assert main(["train-pose", "--out", str(tmp_path / "b"), "--set", "data.camera_model=true", "--scenes",
+                 str(tmp_path)]) == 2
+    assert "data.camera_model: applies to rendered views: with --scenes set data.add_synthetic" in capsys.readouterr().err
     assert main(["eval-pose", "--camera-model", "--scenes", str(tmp_path)]) == 2
     assert "--camera-model applies to rendered views" in capsys.readouterr().err
     assert not (tmp_path / "b").exists()

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from perception.evaluation import eval_pose_heldout
+from perception.baselines.point_transformer import eval_heldout
 from perception.plots.error_plots import binned_means, plot_errors
 
 
@@ -30,7 +30,7 @@ def test_plot_errors_writes_both_figures(tmp_path) -> None:
 
 def test_heldout_cli_scores_the_shipped_weights(tmp_path, capsys) -> None:
     out = tmp_path / "heldout.json"
-    assert eval_pose_heldout.main(["--num", "40", "--views", "2", "--json", str(out), "--plots", str(tmp_path / "plots")]) == 0
+    assert eval_heldout.main(["--num", "40", "--views", "2", "--json", str(out), "--plots", str(tmp_path / "plots")]) == 0
     results = json.loads(out.read_text())["results"]
     train, unseen = results.values()
     assert train["n"] == unseen["n"] == 40
@@ -44,7 +44,7 @@ def test_heldout_cli_scores_the_shipped_weights(tmp_path, capsys) -> None:
 
 def test_plots_without_synthetic_views_is_refused(tmp_path, capsys) -> None:
     with pytest.raises(SystemExit):
-        eval_pose_heldout.main(["--no-synthetic", "--plots", str(tmp_path)])
+        eval_heldout.main(["--no-synthetic", "--plots", str(tmp_path)])
     assert "drop --no-synthetic" in capsys.readouterr().err
 
 
@@ -53,10 +53,10 @@ def test_estimate_errors_are_zero_for_the_truth() -> None:
         def estimate_batch(self, clouds):
             return [type("E", (), {"rotation": r})() for r in truth[: len(clouds)]]
 
-    from perception.pose.data import PointCloudSample
+    from perception.baselines.point_transformer.data import PointCloudSample
 
     truth = [np.eye(3), np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])]
     samples = [PointCloudSample(np.zeros((20, 3), np.float32), r.astype(np.float32)) for r in truth]
-    err = eval_pose_heldout.estimate_errors(Oracle(), samples)
+    err = eval_heldout.estimate_errors(Oracle(), samples)
     assert err["geodesic"] == pytest.approx([0, 0], abs=1e-4) and err["axis"] == pytest.approx([0, 0], abs=1e-4)
     assert err["upright"] == pytest.approx([180.0, 90.0])  # stem +z points away from the camera; then sideways

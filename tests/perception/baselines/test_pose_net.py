@@ -5,10 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from perception.choices import HEAD_NAMES
-from perception.errors import CheckpointMismatchError, PerceptionConfigError
-from perception.pose.backbones import BACKBONES
-from perception.pose.pose_net import (
+from perception.baselines.point_transformer.backbones import BACKBONES
+from perception.baselines.point_transformer.pose_net import (
     PoseNet,
     PoseNetConfig,
     load_backbone,
@@ -16,6 +14,8 @@ from perception.pose.pose_net import (
     load_weights,
     save_checkpoint,
 )
+from perception.choices import HEAD_NAMES
+from perception.errors import CheckpointMismatchError, PerceptionConfigError
 
 
 @pytest.mark.parametrize("name", sorted(BACKBONES))

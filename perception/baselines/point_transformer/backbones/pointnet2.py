@@ -11,7 +11,11 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from perception.pose.backbones.ops import farthest_point_sample, gather_points, knn
+from perception.baselines.point_transformer.backbones.ops import (
+    farthest_point_sample,
+    gather_points,
+    knn,
+)
 
 
 def _mlp(c_in: int, widths: tuple[int, ...]) -> nn.Sequential:

@@ -11,9 +11,9 @@ import pytest
 
 from generator.dataset.readers import read_scene_files
 from generator.dataset.writer import scene_dirname
+from perception.baselines.point_transformer.data import samples_from_detections
 from perception.detection.detector import detections_from_labels
 from perception.pipeline import within_depth_of_core
-from perception.pose.data import samples_from_detections
 
 
 class _SpillingDetector:
