@@ -3,13 +3,8 @@ title, below the scene's own (mushrooms placed, seed)."""
 
 from __future__ import annotations
 
-import os
-
+import mujoco
 import numpy as np
-
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-import mujoco  # noqa: E402
 
 from generator.config import require_image_side  # noqa: E402
 from generator.files import save_rgb_png  # noqa: E402

@@ -7,6 +7,7 @@ stem axis (the shipped :class:`~perception.pose.axis_cnn.AxisCNNEstimator`).
 paper's Mask R-CNN and Point Transformer are kept as baselines in :mod:`perception.baselines`.
 """
 
+import generator  # noqa: F401  (sets the headless rendering default, MUJOCO_GL=egl, before mujoco is imported)
 from perception.errors import CheckpointMismatchError, NoEstimate, PerceptionConfigError
 
 __all__ = ["CheckpointMismatchError", "NoEstimate", "PerceptionConfigError"]

@@ -2,14 +2,11 @@
 the learnable training options; the superseded ``-v0`` ids with the Jaco whose links partly
 collide with nothing)."""
 
-import os
+# Importing generator first sets the headless rendering default (MUJOCO_GL=egl) before anything
+# imports mujoco.
+from gymnasium.envs.registration import register, registry
 
 from generator.lazy import lazy_exports
-
-# Headless rendering by default; set before anything imports mujoco (and picks a GL backend).
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-from gymnasium.envs.registration import register, registry  # noqa: E402
 
 #: Public names and the submodules that define them; loaded on first access (PEP 562) so that
 #: ``sms3d --help`` and the light submodules (the sweep's and training's parsers) do not pay for

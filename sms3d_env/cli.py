@@ -11,11 +11,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 from collections.abc import Sequence
-
-os.environ.setdefault("MUJOCO_GL", "egl")
 
 #: Subcommand -> the module that registers it, in the order ``sms3d --help`` lists them.
 COMMANDS: dict[str, str] = {

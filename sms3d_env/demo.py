@@ -9,13 +9,10 @@ target ringed, the outcome) and, with the ``video`` extra installed, its MP4.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 def picker_strip(env: Any, policy: Any, seed: int, frames: int = 6, title: str = "",

@@ -14,7 +14,6 @@ own (suction: valve, seal, grip; hand: fingers) in :mod:`sms3d_env.tools`; the r
 
 from __future__ import annotations
 
-import os
 import warnings
 from collections.abc import Mapping
 from dataclasses import replace
@@ -416,7 +415,6 @@ class SMS3DPickEnv(gym.Env):
         return self._viewer
 
     def _render(self, h: int, w: int, camera: str, depth: bool) -> np.ndarray:
-        os.environ.setdefault("MUJOCO_GL", "egl")
         r = self._renderers.get((h, w))
         if r is None:
             r = self._renderers[(h, w)] = open_renderer(self.model, h, w)

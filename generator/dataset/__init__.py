@@ -1,14 +1,10 @@
 """Dataset rendering, writing and reading: RGB-D, masks, COCO, manifest, torch datasets.
 
-Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` here (set before MuJoCo is imported).
-For software rendering without EGL use ``MUJOCO_GL=osmesa PYOPENGL_PLATFORM=osmesa``.
+Rendering is headless: ``MUJOCO_GL`` defaults to ``egl`` (set by :mod:`generator` before MuJoCo is
+imported). For software rendering without EGL use ``MUJOCO_GL=osmesa PYOPENGL_PLATFORM=osmesa``.
 """
 
-import os
-
 from generator.lazy import lazy_exports
-
-os.environ.setdefault("MUJOCO_GL", "egl")  # must precede the first import of mujoco
 
 #: Public names and the submodules that define them; loaded on first access (PEP 562) so that
 #: ``sms3d --help`` and light imports (``generator.dataset.errors``, the ``generate`` parser) do

@@ -6,7 +6,6 @@ Run standalone as ``python -m generator.dataset.cli generate --out DIR ...``.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from generator.cli_types import output_path
@@ -114,7 +113,6 @@ def run_show(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    os.environ.setdefault("MUJOCO_GL", "egl")
     parser = argparse.ArgumentParser(prog="sms3d")
     register(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)

@@ -11,14 +11,11 @@ context is rebuilt for each new model.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from typing import Any
 
+import mujoco
 import numpy as np
-
-os.environ.setdefault("MUJOCO_GL", "egl")
-import mujoco  # noqa: E402
 
 from generator.camera import Intrinsics, camera_intrinsics, project, world_from_camera_cv
 from generator.dataset.options import DatasetOptions

@@ -65,7 +65,6 @@ def close_renderers() -> None:
 
 def produce_scene(out_dir: str, index: int, config: dict[str, Any], options: dict[str, Any], run_seed: int) -> str:
     """Generate, render and write scene ``index`` (runs in a worker); returns its split."""
-    os.environ.setdefault("MUJOCO_GL", "egl")
     from generator.generate import generate_scene
 
     cfg = SceneConfig.from_dict(config)
@@ -272,7 +271,6 @@ def _run_pool(todo: list[int], args: tuple[Any, ...], workers: int, update: Call
 
 
 def _worker_init(parent_pid: int) -> None:
-    os.environ.setdefault("MUJOCO_GL", "egl")
     # No orphan may keep writing scenes beside a resumed run.
     die_with_parent(parent_pid)
 
