@@ -169,7 +169,7 @@ TRIGGER_FIELD_FLAGS = {"out": "out", "episodes": "episodes", "seed": "seed", "nu
 
 
 def _cmd_train_trigger(args: Any) -> int:
-    from sms3d_env.training.recipes import TRIGGER_KIND, default_recipe, read_recipe
+    from sms3d_env.training.recipes import TRIGGER_KIND, default_recipe, parse_hyperparams, read_recipe
     from sms3d_env.training.trigger_rollouts import train_trigger
 
     try:
@@ -181,6 +181,7 @@ def _cmd_train_trigger(args: Any) -> int:
             value = getattr(args, dest)
             if value is not None:
                 recipe = recipe.with_fields({field: value}, f"--{dest.replace('_', '-')}")
+        recipe = recipe.with_fields(parse_hyperparams(args.hyperparams), "--set")
     except (ValueError, FileNotFoundError) as e:  # RecipeError names the file or flag and the field
         print(f"error: {e}")
         return 2
@@ -260,9 +261,9 @@ def register(subparsers: Any) -> None:
                    help="rl/residual: episodes per periodic evaluation")
     p.add_argument("--checkpoint-freq", type=int, default=None,
                    help="rl/residual: env steps between checkpoints (0: none)")
-    p.add_argument("--hyperparams", nargs="+", default=[], metavar="KEY=VALUE",
+    p.add_argument("--hyperparams", "--set", nargs="+", default=[], metavar="KEY=VALUE",
                    help="replace any other field of the recipe, e.g. learning_rate=1e-4 net_arch=[64,64] "
-                        "(values read as YAML; the fields: docs/training.md)")
+                        "(values read as YAML; the fields: docs/training.md; --set as in train-pose)")
     # Deprecated flags (hidden): they still work, with a warning naming the replacement.
     p.add_argument("--recipe", dest="legacy_recipe", choices=RECIPE_KINDS, default=None, help=argparse.SUPPRESS)
     p.add_argument("--conf-file", dest="legacy_conf_file", default=None, help=argparse.SUPPRESS)
@@ -310,6 +311,9 @@ def register(subparsers: Any) -> None:
     t.add_argument("--epochs", type=int, default=None, help=f"regression epochs (default {tdef.epochs})")
     t.add_argument("--workers", type=int, default=None,
                    help=f"processes collecting the labels (default {tdef.workers})")
+    t.add_argument("--set", "--hyperparams", dest="hyperparams", nargs="+", default=[], metavar="KEY=VALUE",
+                   help="replace any other field of the recipe, e.g. learning_rate=3e-4 net_arch=[128,128] (values "
+                        "read as YAML)")
     t.set_defaults(func=_cmd_train_trigger)
 
     e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "

@@ -143,6 +143,10 @@ def test_the_cli_refuses_bad_settings_and_lists_the_command(capsys):
 
     assert main(["train-trigger", "--margin", "2", "--out", "unused"]) == 2
     assert "TriggerConfig.margin" in capsys.readouterr().out
+    assert main(["train-trigger", "descend_trigger", "--set", "learning_rate=0"]) == 2
+    assert "--set: TriggerConfig.learning_rate must be a number > 0" in capsys.readouterr().out
+    assert main(["train-trigger", "ppo"]) == 2
+    assert "an rl recipe; sms3d train-policy trains it" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         main(["--help"])
     assert "train-trigger" in capsys.readouterr().out
