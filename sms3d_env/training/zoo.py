@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import io
 import pickle
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,13 +69,21 @@ def recipe_path(name_or_path: str | Path) -> Path:
 ORDERED_DICT_TAG = "tag:yaml.org,2002:python/object/apply:collections.OrderedDict"
 
 
+#: A number in exponent notation without a dot (``3e-4``, JSON's ``3e-05``): a float in YAML 1.2
+#: and JSON, a string in the YAML 1.1 that PyYAML reads.
+EXPONENT_FLOAT = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
+
+
 def _safe_zoo_yaml(text: str) -> Any:
     """YAML as ``yaml.safe_load`` reads it, plus :data:`ORDERED_DICT_TAG` read as a plain mapping
-    (its ``[[key, value], ...]`` argument); any other Python tag stays refused."""
+    (its ``[[key, value], ...]`` argument) and :data:`EXPONENT_FLOAT` numbers read as floats (a
+    run's ``config.json`` writes rates so); any other Python tag stays refused."""
     import yaml
 
     class Loader(yaml.SafeLoader):
         pass
+
+    Loader.add_implicit_resolver("tag:yaml.org,2002:float", EXPONENT_FLOAT, list("-+0123456789"))
 
     def ordered_dict(loader: Any, node: Any) -> dict[str, Any]:
         (pairs,) = loader.construct_sequence(node, deep=True)

@@ -78,6 +78,14 @@ def test_numbers_given_by_hand_are_read_as_numbers(number):
         assert parse_field_value(text) == pytest.approx(number), text
 
 
+def test_rates_in_exponent_notation_are_numbers_in_a_recipe_file(tmp_path):
+    """``learning_rate: 3e-4`` (YAML 1.2, JSON) is a number, as a run's config.json writes it."""
+    path = tmp_path / "rates.yml"
+    path.write_text("recipe: rl\nlearning_rate: 3e-4\nlearning_rate_final: 3e-05\ntotal_steps: 1000\n")
+    cfg = read_recipe(path).config
+    assert (cfg.learning_rate, cfg.learning_rate_final, cfg.total_steps) == (3e-4, 3e-5, 1000)
+
+
 def test_hyperparams_read_yaml_values():
     assert parse_hyperparams(["net_arch=[64, 64]", "learning_rate_final=null", "normalize=true",
                               "vec_env=dummy"]) == {"net_arch": [64, 64], "learning_rate_final": None,
