@@ -169,7 +169,12 @@ TRIGGER_FIELD_FLAGS = {"out": "out", "episodes": "episodes", "seed": "seed", "nu
 
 
 def _cmd_train_trigger(args: Any) -> int:
-    from sms3d_env.training.recipes import TRIGGER_KIND, default_recipe, parse_hyperparams, read_recipe
+    from sms3d_env.training.recipes import (
+        TRIGGER_KIND,
+        default_recipe,
+        parse_hyperparams,
+        read_recipe,
+    )
     from sms3d_env.training.trigger_rollouts import train_trigger
 
     try:
