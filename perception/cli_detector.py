@@ -27,17 +27,55 @@ RUN_FOLDER_HELP = ("run folder (last.pt, best.pt, log.csv, run_settings.json). R
                    "command resumes from the last finished epoch (more --epochs extend a run, restarting the warm-up + cosine schedule over the new length); other settings are "
                    "refused, naming each")
 OVERWRITE_HELP = "empty --out and start anew, instead of resuming its run or refusing other settings"
+#: What ``--out`` is when the command runs a recipe (``perception.recipe``).
+RECIPE_OUT_HELP = ("; with a RECIPE, default the recipe's out, and a recipe of several steps trains step NAME in "
+                   "OUT/NAME; without one, required")
 
 
-def run_folder_flags(p: argparse.ArgumentParser) -> None:
+def run_folder_flags(p: argparse.ArgumentParser, runs_recipes: bool = False) -> None:
     """``--out`` and how a rerun treats the run in it (``generator.run_folder``'s rule), for the
-    training commands that resume."""
-    p.add_argument("--out", required=True, help=RUN_FOLDER_HELP)
+    training commands that resume; a command that ``runs_recipes`` may take its ``--out`` from a
+    recipe (:func:`recipe_flags`)."""
+    if runs_recipes:
+        p.add_argument("--out", help=RUN_FOLDER_HELP + RECIPE_OUT_HELP)
+    else:
+        p.add_argument("--out", required=True, help=RUN_FOLDER_HELP)
     rerun = p.add_mutually_exclusive_group()
     rerun.add_argument("--resume", action="store_true",
                        help="only continue the run in --out: refuse when it holds none (a rerun with the same "
                             "settings resumes without this flag too)")
     rerun.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+
+
+def recipe_flags(p: argparse.ArgumentParser, shipped: str, run_flags: Sequence[str]) -> None:
+    """The positional RECIPE of a training command that runs recipes (``perception.recipe``;
+    ``shipped`` names the shipped network's, ``run_flags`` the command's flags that replace a
+    recipe's options) and the flags that only apply with one."""
+    p.add_argument("recipe", nargs="?", metavar="RECIPE",
+                   help=f"a shipped recipe ({shipped}: the shipped network's, perception/recipes/{shipped}.yml) or a "
+                        "recipe file: generate its datasets where missing, then train its steps in order, each "
+                        "resuming when run again. The recipe sets the datasets and training options; the flags "
+                        f"that apply with it are --out, --data-root, {', '.join(run_flags)} (replacing the "
+                        "recipe's), --overwrite (every step starts anew; the datasets are kept) and --dry-run")
+    p.add_argument("--data-root", metavar="DIR",
+                   help="with a RECIPE: the folder its datasets are generated in and read from (default the recipe's "
+                        "data_root)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="with a RECIPE: print the sms3d commands it runs, one a line, and run none")
+
+
+def check_without_recipe(args: argparse.Namespace, required: Sequence[str], shipped: str) -> None:
+    """A training command run without a RECIPE: each flag in ``required`` is given and the
+    recipe-only flags are not; ``PerceptionConfigError`` naming the flag."""
+    from perception.errors import PerceptionConfigError
+
+    for flag in ("--data-root", "--dry-run"):
+        if getattr(args, flag[2:].replace("-", "_")):
+            raise PerceptionConfigError(flag, f"applies only with a RECIPE (e.g. sms3d {args.command} {shipped})")
+    for flag in required:
+        if getattr(args, flag[2:].replace("-", "_")) is None:
+            raise PerceptionConfigError(flag, f"required without a RECIPE (e.g. sms3d {args.command} {shipped}, the "
+                                              "shipped network's recipe)")
 
 
 def check_out(out: str, resume: bool) -> None:
@@ -201,15 +239,28 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_train_segmenter(args: argparse.Namespace) -> int:
-    from generator.run_folder import check_out_path
+def segmenter_train_config(args: argparse.Namespace):
+    """The ``SegmenterTrainConfig`` that ``train-segmenter``'s flags give (an unset flag keeps the
+    config's default)."""
     from perception.detection.segmenter_config import SegmenterTrainConfig
+
+    return SegmenterTrainConfig(**{name: value for name in _TRAIN_SEGMENTER_FIELDS
+                                   if (value := getattr(args, name)) is not None})
+
+
+def cmd_train_segmenter(args: argparse.Namespace) -> int:
+    if args.recipe is not None:
+        from perception.recipe import run_recipe
+
+        return run_recipe(args, register, segmenter_train_config)
+    from generator.run_folder import check_out_path
     from perception.detection.train_segmenter import train_segmenter
 
+    check_without_recipe(args, ("--data", "--out"), "segmenter")
     check_out_path(args.out)
     check_datasets("--data", args.data)
     _set_threads(args.threads)
-    train = SegmenterTrainConfig(**{name: getattr(args, name) for name in _TRAIN_SEGMENTER_FIELDS})
+    train = segmenter_train_config(args)
     log = train_segmenter(args.data, args.out, train=train, overwrite=args.overwrite)
     print(json.dumps(log[-1] if log else {}, indent=2))
     return 0
@@ -308,24 +359,31 @@ _TRAIN_SEGMENTER_FIELDS = {
 
 
 def _add_dataclass_flags(p: argparse.ArgumentParser, cls: type, helps: dict[str, str]) -> None:
-    """One ``--flag`` per field in ``helps``, its type and default taken from dataclass ``cls``."""
+    """One ``--flag`` per field in ``helps``, its type taken from dataclass ``cls``; unset, a flag
+    is None and the field keeps the default its help shows (so that a flag given beside a recipe
+    can be told from one left out)."""
     import dataclasses
 
     fields = {f.name: f for f in dataclasses.fields(cls)}
     for name, text in helps.items():
         default = fields[name].default
         kind = float if name in ("lr", "time_limit_min") else int
-        p.add_argument(f"--{name.replace('_', '-')}", type=kind, default=default, help=f"{text} (default {default})")
+        p.add_argument(f"--{name.replace('_', '-')}", type=kind, help=f"{text} (default {default})")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     from perception.baselines.maskrcnn.config import DetectorConfig, DetectorTrainConfig
     from perception.detection.segmenter_config import SegmenterTrainConfig
 
-    p = subparsers.add_parser("train-segmenter", help="train the RGB-D segmenter (stage 1) on generated datasets (resumable)")
-    p.add_argument("--data", required=True, nargs="+", help="dataset folders written by `sms3d generate` (train and val splits)")
+    p = subparsers.add_parser(
+        "train-segmenter", help="train the RGB-D segmenter (stage 1) from a recipe or on generated datasets (resumable)",
+        description="Train the RGB-D segmenter: from a recipe (sms3d train-segmenter segmenter: the shipped network's "
+                    "datasets, generated where missing, and training settings) or on the dataset folders --data names.")
+    recipe_flags(p, "segmenter", ["--threads"])
+    p.add_argument("--data", nargs="+", help="dataset folders written by `sms3d generate` (train and val splits); "
+                                             "required without a RECIPE")
     p.add_argument("--threads", type=_positive_int, default=None, help="torch CPU threads (>= 1; default: torch's own)")
-    p.add_argument("--out", required=True, help=RUN_FOLDER_HELP)
+    p.add_argument("--out", help=RUN_FOLDER_HELP + RECIPE_OUT_HELP)
     _add_dataclass_flags(p, SegmenterTrainConfig, _TRAIN_SEGMENTER_FIELDS)
     p.add_argument("--overwrite", "--restart", action="store_true", help=f"{OVERWRITE_HELP} (--restart: the same)")
     p.set_defaults(func=_clear_errors(cmd_train_segmenter))

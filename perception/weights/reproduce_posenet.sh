@@ -6,7 +6,7 @@
 #   bash perception/weights/reproduce_posenet.sh            # from the repository root
 #
 # Steps 6-8 cut each mushroom's points with the shipped segmenter's masks out of the segmenter's
-# training data (perception/weights/segmenter/reproduce.sh generates it into $DATA).
+# training data (`sms3d train-segmenter segmenter` generates it into runs/seg, the default $DATA).
 # Steps 1, 6, 7 and 8 ran under a wall-clock limit (--time-limit-min) and step 2 was stopped by
 # hand; here each runs the number of epochs it then ran (its plateau schedule does not depend on
 # the total), and step 2 keeps the epoch with the lowest validation stem-axis error, the rule by

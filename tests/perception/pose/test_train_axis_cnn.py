@@ -272,9 +272,10 @@ def test_the_command_checks_every_file_before_cutting_crops(beds, tmp_path, caps
 
 
 def test_the_command_defaults_are_the_training_config_defaults() -> None:
+    from perception.cli_pose import axis_train_config
     from sms3d_env.cli import build_parser
 
-    args = build_parser("train-axis-cnn").parse_args(["train-axis-cnn", "--out", "x", "--scenes", "y"])
-    defaults = AxisTrainConfig()
-    assert (args.epochs, args.batch_size, args.lr, args.seed, args.time_limit_min, args.loss) == (
-        defaults.epochs, defaults.batch_size, defaults.lr, defaults.seed, defaults.time_limit_min, defaults.loss)
+    parser = build_parser("train-axis-cnn")
+    assert axis_train_config(parser.parse_args(["train-axis-cnn", "--out", "x", "--scenes", "y"])) == AxisTrainConfig()
+    given = parser.parse_args(["train-axis-cnn", "--out", "x", "--scenes", "y", "--epochs", "3", "--loss", "cosine"])
+    assert axis_train_config(given) == AxisTrainConfig(epochs=3, loss="cosine")
