@@ -27,15 +27,17 @@ import generator  # noqa: E402
 import sms3d_env  # noqa: E402, F401
 
 
-def measure(env_id: str, steps: int, image_obs: bool, n: int, pool: int = 0) -> tuple[float, float]:
+def measure(env_id: str, steps: int, image_obs: bool, n: int, pool: int = 0, substeps: int = 20) -> tuple[float, float]:
     """Steps/s with random actions (the time limit's resets included) and the median reset time
     before the timed steps; ``pool`` > 0 draws beds from a pool of that many, every one of them
     generated and compiled before the timing (as in a long training run, whose envs have drawn
     each bed of their pool)."""
+    from sms3d_env.controller import ControllerConfig
     from sms3d_env.scene_source import SceneSourceConfig
 
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
-    env = gym.make(env_id, scene=SceneSourceConfig(config=cfg, pool=pool), image_obs=image_obs)  # with its time limit
+    env = gym.make(env_id, scene=SceneSourceConfig(config=cfg, pool=pool), image_obs=image_obs,
+                   controller=ControllerConfig(substeps=substeps))  # with its time limit
     env.reset(seed=0)
     source = env.unwrapped.scene_source
     while len(source.pool) < pool:
@@ -70,6 +72,8 @@ def main() -> None:
     ap.add_argument("--mushrooms", type=int, default=50)
     ap.add_argument("--resets", type=int, default=20)
     ap.add_argument("--version", choices=("v1", "v0"), default="v1")
+    ap.add_argument("--substeps", type=int, default=20,
+                    help="physics steps per 40 ms control step (ControllerConfig.substeps; default 20 x 2 ms)")
     ap.add_argument("--fetch-python", default=None,
                     help="a python with gymnasium-robotics (bench_fetch.py's venv): measure the anchor before and "
                          "after this run's rows and print the ratio")
@@ -77,17 +81,17 @@ def main() -> None:
     fetch = [fetch_rate(args.fetch_python)] if args.fetch_python else []
     env_id, train_id = f"SMS3DPick-{args.version}", f"SMS3DPickTrain-{args.version}"
     rows = []
-    rate, reset_s = measure(env_id, args.steps, False, args.mushrooms)
+    rate, reset_s = measure(env_id, args.steps, False, args.mushrooms, substeps=args.substeps)
     rows.append(("state obs", rate, reset_s))
-    rate_p, reset_p = measure(env_id, args.steps, False, args.mushrooms, pool=8)
+    rate_p, reset_p = measure(env_id, args.steps, False, args.mushrooms, pool=8, substeps=args.substeps)
     rows.append(("state obs, 8-bed pool", rate_p, reset_p))
-    rate_i, reset_i = measure(env_id, max(50, args.steps // 5), True, args.mushrooms)
+    rate_i, reset_i = measure(env_id, max(50, args.steps // 5), True, args.mushrooms, substeps=args.substeps)
     rows.append(("state + 64x64 RGB-D", rate_i, reset_i))
     if args.fetch_python:
         fetch.append(fetch_rate(args.fetch_python))
     from sms3d_env.controller import ControllerConfig
 
-    ctrl = ControllerConfig()
+    ctrl = ControllerConfig(substeps=args.substeps)
     print(f"{env_id}, {args.mushrooms} mushrooms, {ctrl.control_dt * 1e3:.0f} ms/step ({ctrl.substeps} x "
           f"{ctrl.control_dt / ctrl.substeps * 1e3:g} ms), random actions, resets included")
     print(f"{'observation':<22}{'steps/s':>10}{'reset median (s)':>18}{'x Fetch':>9}")

@@ -4,7 +4,10 @@ percentile), over held-out seeded 25-mushroom beds (seeds from 1,000,000). Each 
 cell runs in a worker process.
 
 Usage: python benchmarks/bench_robots.py [--episodes 200] [--robots gantry jaco]
-       [--errors 0 10 20 30] [--workers 2] [--json FILE]
+       [--errors 0 10 20 30] [--substeps 20] [--workers 2] [--json FILE]
+
+``--json`` also keeps each episode's outcome (success or failure cause, by seed), so that two runs
+that differ in one setting (e.g. ``--substeps``) compare episode by episode.
 """
 
 from __future__ import annotations
@@ -22,29 +25,34 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 HELD_OUT_SEED = 1_000_000
 
 
-def run_cell(robot: str, error_deg: float, episodes: int) -> dict:
+def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = 20) -> dict:
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the ids)
     from generator import SceneConfig
+    from sms3d_env.controller import ControllerConfig
     from sms3d_env.pickers.episode import run_episode
     from sms3d_env.pickers.scripted import ScriptedPicker
 
     env = gym.make("SMS3DPick-v1", robot=robot, scene=SceneConfig().replace(placement__num_mushrooms=25),
-                   pose_source="noisy" if error_deg else "oracle", pose_error_deg=error_deg)
+                   pose_source="noisy" if error_deg else "oracle", pose_error_deg=error_deg,
+                   controller=ControllerConfig(substeps=substeps))
     picker = ScriptedPicker.for_env(env)
-    causes, times = collections.Counter(), []
+    outcomes, times = [], []
     for seed in range(HELD_OUT_SEED, HELD_OUT_SEED + episodes):
         result = run_episode(env, picker, seed)
-        causes["success" if result["success"] else result["failure_cause"]] += 1
+        outcomes.append("success" if result["success"] else result["failure_cause"])
         if result["success"]:
             times.append(result["time_s"])
-    return {"robot": robot, "error_deg": error_deg, "episodes": episodes, "success": causes.pop("success", 0),
-            "failures": dict(causes), "time_median_s": float(np.median(times)) if times else None,
-            "time_p90_s": float(np.percentile(times, 90)) if times else None}
+    causes = collections.Counter(outcomes)
+    return {"robot": robot, "error_deg": error_deg, "episodes": episodes, "substeps": substeps,
+            "success": causes.pop("success", 0), "failures": dict(causes),
+            "time_median_s": float(np.median(times)) if times else None,
+            "time_p90_s": float(np.percentile(times, 90)) if times else None,
+            "first_seed": HELD_OUT_SEED, "outcomes": outcomes}
 
 
-def _cell(args: tuple[str, float, int]) -> dict:
+def _cell(args: tuple[str, float, int, int]) -> dict:
     return run_cell(*args)
 
 
@@ -53,10 +61,12 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--robots", nargs="+", default=["gantry", "jaco"])
     parser.add_argument("--errors", type=float, nargs="+", default=[0.0, 10.0, 20.0, 30.0])
+    parser.add_argument("--substeps", type=int, default=20,
+                        help="physics steps per 40 ms control step (ControllerConfig.substeps; default 20 x 2 ms)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", default=None, help="also write the rows here")
     args = parser.parse_args()
-    cells = [(r, e, args.episodes) for r in args.robots for e in args.errors]
+    cells = [(r, e, args.episodes, args.substeps) for r in args.robots for e in args.errors]
     with get_context("spawn").Pool(args.workers) as pool:
         rows = pool.map(_cell, cells)
     print("| robot | error (deg) | success | failures | cycle time median / p90 (s) |")
