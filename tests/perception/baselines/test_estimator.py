@@ -114,6 +114,7 @@ def test_test_time_views_are_turns_about_the_optical_axis(upright_pass: bool) ->
         PoseEstimator.from_pretrained(views=0)
 
 
+@pytest.mark.slow  # the baseline network on 40 rendered views: about a minute on 2 cores
 def test_upright_pass_estimates_the_stem_axis(estimator: PoseEstimator) -> None:
     samples = generate_samples(40, seed=424242, models=default_models(), config=ViewConfig(surface_samples=20000))
     upright = PoseEstimator(estimator.model, upright_pass=True, seed=0).estimate_batch([s.points for s in samples])

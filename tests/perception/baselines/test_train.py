@@ -107,6 +107,7 @@ def test_dataset_items_and_small_samples_dropped() -> None:
     assert torch.equal(ds[0][0], x)  # reproducible per (seed, epoch, index)
 
 
+@pytest.mark.slow  # trains the baseline network: about a minute on 2 cores
 def test_short_training_beats_chance_and_the_upright_prior(tmp_path, models) -> None:
     """Point Transformer, 128 points, 20 epochs on 384 views (45° tilt σ) — about 20 s."""
     threads = torch.get_num_threads()
