@@ -54,6 +54,8 @@ class GantryConfig:
     name: ClassVar[str] = "gantry"
     prefix: ClassVar[str] = GANTRY_PREFIX
     joints: ClassVar[tuple[str, ...]] = GANTRY_JOINTS
+    # Straight Cartesian approaches: the wrist's only singularity (90 deg tilt) is out of its range.
+    approach: ClassVar[str] = "cartesian"
 
     mount_pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
     mount_yaw_deg: float = 0.0

@@ -143,7 +143,9 @@ class SMS3DPickEnv(gym.Env):
     ## Version history
     - v1: the robot is physically honest. A Cartesian gantry harvester (``robot="gantry"``, the
       default) or a Jaco hanging above the bed with a right-angle suction adapter
-      (``robot="jaco"``), every link of either
+      (``robot="jaco"``; its scripted picker reaches the stand-off point along a straight
+      joint-space path, ``RobotConfig.approach="joint"``, where the straight Cartesian approach
+      stalled at the arm's shoulder and wrist singularities), every link of either
       colliding with the soil and with every mushroom; every mushroom is free and rooted
       (``SceneSourceConfig.free_radius=None``), so any link that touches a cap is judged by the
       same bruise and disturbed-neighbour rules as the tool. ``info`` gains ``time_s``; the

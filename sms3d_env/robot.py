@@ -27,6 +27,8 @@ CUP_BODY = "cup"
 CUP_GEOM = "cup_face"
 Tool = Literal["suction", "hand"]
 TOOLS: tuple[str, ...] = ("suction", "hand")
+#: How the scripted pickers bring the tool to the stand-off point (``RobotConfig.approach``).
+APPROACHES: tuple[str, ...] = ("cartesian", "joint")
 #: The suction tool's frame on the Jaco's last link (its -z is the approach axis); the hand's
 #: own frame is the link's.
 JACO_TOOL_QUAT = (0.0, 0.70710678, 0.70710678, 0.0)
@@ -72,6 +74,7 @@ class RobotSpec(Protocol):
     finger_damping: float
     finger_armature: float
     home_q: tuple[float, ...]
+    approach: str  # one of APPROACHES: how the scripted pickers reach the stand-off point
 
     def build_spec(self) -> mujoco.MjSpec:
         """The robot with its tool, actuators and wrist sensor, unprefixed, its base the
@@ -115,6 +118,11 @@ class RobotConfig:
         finger_damping, finger_armature: finger joint damping (N m s/rad) and armature (kg m^2).
             ASSUMPTION replacing dm_control's 0.75 and 0.1, which with this torque would close a
             finger in ~6 s and hit a cap like a 1.4 kg mass: now ~2.4 rad/s, 0.3 kg at the tip.
+        approach: how the scripted pickers (``ScriptedPicker.for_env``) bring the tool to the
+            stand-off point above the target: ``"cartesian"`` straight towards it, the cup
+            turned onto the axis on the way; ``"joint"`` first along a straight joint-space
+            path to the arm configuration there (:mod:`sms3d_env.pickers.joint_path`), for an
+            arm whose straight Cartesian approach crosses a singularity.
     """
 
     name: ClassVar[str] = "jaco"
@@ -138,9 +146,12 @@ class RobotConfig:
     finger_armature: float = 0.001
     home_q: tuple[float, ...] = field(default=tuple(HOME_Q))
     all_links_collide: bool = False
+    approach: str = "cartesian"
 
     def __post_init__(self) -> None:
         check_tool_fields(self)
+        if self.approach not in APPROACHES:
+            raise ValueError(f"{type(self).__name__}.approach must be one of {APPROACHES}, got {self.approach!r}")
         if len(self.home_q) != 6:
             raise ValueError(f"{type(self).__name__}.home_q must have 6 entries")
         if not (isinstance(self.tool_tilt_deg, (int, float)) and 0.0 <= self.tool_tilt_deg <= 90.0):

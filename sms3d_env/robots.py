@@ -16,8 +16,12 @@ from sms3d_env.robot_names import ROBOTS
 #: keeps the wrist bent (scripted picker, 100 held-out 25-mushroom beds per error: 98 / 97 / 93 /
 #: 84 % at 0 / 10 / 20 / 30°, one approach stopping short in the 400). Home: the cup 20 cm above the
 #: patch centre, pointing down (solved by least squares from random starts, the best conditioned).
+#: Approach: along a straight joint-space path (``approach="joint"``); the straight Cartesian
+#: approach stopped short of 10 / 10 / 8 / 20 of 400 targets at 0 / 10 / 20 / 30° where the arm
+#: folded under its shoulder or straightened its wrist on the way, the joint-space path of none.
 HANGING_JACO = RobotConfig(mount_pos=(-0.25, 0.0, 0.70), mount_roll_deg=180.0, tool_tilt_deg=90.0,
-                           all_links_collide=True, home_q=(0.364, 1.227, 0.811, -0.691, -2.037, 3.415))
+                           all_links_collide=True, home_q=(0.364, 1.227, 0.811, -0.691, -2.037, 3.415),
+                           approach="joint")
 
 
 def make_robot(robot: str | RobotSpec) -> RobotSpec:

@@ -52,9 +52,21 @@ class TargetRule:
 class Reachability:
     """IK feasibility on the arm-only model (a few ms per query; a repeated query is answered from
     a cache of the ``cache_size`` most recently used solves: a bed pool asks the same ones at each
-    of its beds' resets)."""
+    of its beds' resets).
+
+    A solve starts at home. Where it fails from there, it is tried again from home with one
+    revolute joint turned by each of ``RESTART_TURNS`` (where the joint's range allows); each
+    unlimited joint of a solution is taken within half a turn of home, and the solution kept is
+    the one whose straight joint-space path from home stays best conditioned (the largest least
+    :meth:`conditioning` along it: the path the scripted picker's joint-space transfer follows).
+    Measured why: from the hanging Jaco's tool-down home, the least squares stalled at the wrist
+    singularity (joint 4 near 0, joint 5 near pi, where the residual's gradient vanishes) for 3 of
+    1,600 estimated pre-grasp poses (400 held-out beds at each of 0 / 10 / 20 / 30 deg); the
+    restarts solve all three. Kept by the end's conditioning alone, one of them was reached by a
+    path that turned joints 5 and 6 by 3.7 and 4.6 rad and stalled 6 mm short."""
 
     cache_size = 8192
+    RESTART_TURNS = (np.pi / 2, -np.pi / 2, np.pi)
 
     def __init__(self, model: mujoco.MjModel, site: str, arm_qadr: np.ndarray, home: np.ndarray) -> None:
         self.model, self.data = model, mujoco.MjData(model)
@@ -68,6 +80,10 @@ class Reachability:
             if model.jnt_limited[j]:
                 lo[k], hi[k] = model.jnt_range[j] + np.array([1e-3, -1e-3])
         self.lo, self.hi, self.home = lo, hi, np.clip(home, lo + 1e-6, hi - 1e-6)
+        hinge = np.array([model.jnt_type[jids[a]] == mujoco.mjtJoint.mjJNT_HINGE for a in arm_qadr])
+        self.revolute = np.flatnonzero(hinge)
+        self.unlimited = hinge & ~model.jnt_limited[[jids[a] for a in arm_qadr]].astype(bool)
+        self.dofs = np.asarray(arm_qadr)  # an arm-only model: each joint's qpos address is its dof's
         self._solved: dict[tuple[bytes, bytes, tuple[float, ...]], np.ndarray | None] = {}
 
     def _res(self, q: np.ndarray, pos: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -94,7 +110,34 @@ class Reachability:
 
     def _solve(self, cap_top: np.ndarray, axis: np.ndarray, offsets: tuple[float, ...]) -> np.ndarray | None:
         z = -axis / np.linalg.norm(axis)
-        q = self.home
+        q = self._solve_from(self.home, cap_top, z, offsets)
+        if q is not None:
+            return q
+        solutions = []
+        for k in self.revolute:
+            for turn in self.RESTART_TURNS:
+                start = self.home.copy()
+                start[k] += turn
+                if self.lo[k] < start[k] < self.hi[k]:
+                    q = self._solve_from(start, cap_top, z, offsets)
+                    if q is not None:
+                        solutions.append(self._near_home(q))
+        return max(solutions, key=self.path_conditioning) if solutions else None
+
+    def _near_home(self, q: np.ndarray) -> np.ndarray:
+        """``q`` with each unlimited joint turned by whole turns to within half a turn of home
+        (the same arm pose), where that stays within the solve's bounds."""
+        near = self.home + (q - self.home + np.pi) % (2 * np.pi) - np.pi
+        return np.where(self.unlimited & (self.lo <= near) & (near <= self.hi), near, q)
+
+    def path_conditioning(self, q: np.ndarray, samples: int = 21) -> float:
+        """The least :meth:`conditioning` on the straight joint-space path from home to ``q``."""
+        return min(self.conditioning(self.home + s * (q - self.home)) for s in np.linspace(0.0, 1.0, samples))
+
+    def _solve_from(self, q: np.ndarray, cap_top: np.ndarray, z: np.ndarray, offsets: tuple[float, ...]
+                    ) -> np.ndarray | None:
+        """The cup ``offsets[-1]`` before ``cap_top`` along the tool axis ``z``, solved from ``q``
+        through the earlier offsets; None if one fails."""
         for offset in offsets:
             sol = least_squares(self._res, q, bounds=(self.lo, self.hi), max_nfev=100,
                                 args=(cap_top - z * offset, z))
@@ -102,6 +145,16 @@ class Reachability:
                 return None
             q = np.clip(sol.x, self.lo + 1e-6, self.hi - 1e-6)
         return q
+
+    def conditioning(self, q: np.ndarray) -> float:
+        """The smallest singular value of the tool site's Jacobian (m or rad per rad or m) over
+        the arm's joints at ``q``: 0 at a singular configuration."""
+        self.data.qpos[self.qadr] = q
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_comPos(self.model, self.data)
+        jac = np.zeros((6, self.model.nv))
+        mujoco.mj_jacSite(self.model, self.data, jac[:3], jac[3:], self.site)
+        return float(np.linalg.svd(jac[:, self.dofs], compute_uv=False)[-1])
 
     def reachable(self, cap_top: np.ndarray, axis: np.ndarray, standoff: float = 0.05) -> bool:
         return self.solve(cap_top, axis, (standoff, 0.0)) is not None

@@ -5,7 +5,10 @@ with the cup facing down the axis; descend along the axis with suction on until 
 twist about the estimated stem axis ("twist, do not pull", optionally with a gentle bend); lift
 straight up. A wrong estimate tilts the cup against the cap (no seal, or a contact off the cap
 top) and twists about the wrong axis, which bends the root and the seal. ``HandPicker`` does the
-same with the Jaco hand: open, descend around the cap, close, twist, lift.
+same with the Jaco hand: open, descend around the cap, close, twist, lift. For an arm whose
+straight Cartesian approach crosses a singularity (``RobotConfig.approach="joint"``: the v1 Jaco),
+the approach first follows a straight joint-space path to the stand-off configuration
+(:mod:`sms3d_env.pickers.joint_path`).
 """
 
 from __future__ import annotations
@@ -16,19 +19,23 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from sms3d_env.pickers.joint_path import JointSpaceTransfer
 
-def _tool_axis(quat: np.ndarray) -> np.ndarray:
-    """The tool's approach axis (its frame's z, world) from the observed quaternion (w, x, y, z)."""
+
+def _tool_rotation(quat: np.ndarray) -> np.ndarray:
+    """The tool frame's rotation (3 x 3, world) from the observed quaternion (w, x, y, z)."""
     mat = np.empty(9)
     mujoco.mju_quat2Mat(mat, np.asarray(quat, np.float64))
-    return mat[2::3]
+    return mat.reshape(3, 3)
 
 
 class _View(NamedTuple):
     """What every phase reads from the observation."""
 
     p: np.ndarray  # tool site position
-    z: np.ndarray  # tool axis (approach direction)
+    rot: np.ndarray  # tool frame rotation (3 x 3, world)
+    z: np.ndarray  # tool axis (approach direction: the frame's z)
+    q: np.ndarray  # arm joints (rad or m)
     c: np.ndarray  # estimated cap top
     axis: np.ndarray  # estimated stem axis (unit)
     held: bool  # the tool holds a mushroom (sealed, or pinched by the fingers)
@@ -40,7 +47,8 @@ class ScriptedPicker:
     Phases, all along the *estimated* pose from the observation:
 
     1. ``approach``: move to a stand-off point above the estimated cap top on the estimated stem
-       axis, the cup facing down that axis;
+       axis, the cup facing down that axis (with a ``transfer``: first along a straight
+       joint-space path to the arm configuration there, planned at the phase's first step);
     2. ``descend``: move down the axis with suction on until the cup seals (or give up);
     3. ``twist``: rotate about the estimated stem axis through the cup ("twist, do not pull"),
        with a slight pull along the axis and an optional gentle bend about the estimated stem
@@ -59,6 +67,9 @@ class ScriptedPicker:
         pull_speed: slight withdrawal along the axis while twisting (m/s).
         lift_speed, lift_ramp_steps: lift speed (m/s), reached linearly over this many steps.
         settle_steps: still steps after the seal forms (the arm stops pressing).
+        transfer: the joint-space path of the approach (:class:`JointSpaceTransfer`), or None
+            (a Cartesian approach only). ``for_env`` gives one to robots with
+            ``approach="joint"``.
     """
 
     approach_command = -1.0  # tool command on the way in (suction off)
@@ -68,23 +79,29 @@ class ScriptedPicker:
                  control_dt: float = 0.04, standoff: float = 0.03, stem_height: float = 0.04,
                  descend_speed: float = 0.02, twist_rate: float = 0.8, bend_rate: float = 0.0,
                  twist_steps: int = 30, pull_speed: float = 0.002, settle_steps: int = 2,
-                 lift_speed: float = 0.06, lift_ramp_steps: int = 5) -> None:
+                 lift_speed: float = 0.06, lift_ramp_steps: int = 5,
+                 transfer: JointSpaceTransfer | None = None) -> None:
         self.vmax, self.wmax, self.dt = max_linear_speed, max_angular_speed, control_dt
         self.standoff, self.stem_height = standoff, stem_height
         self.descend_speed, self.bend_rate, self.twist_rate = descend_speed, bend_rate, twist_rate
         self.twist_steps, self.pull_speed, self.settle_steps = twist_steps, pull_speed, settle_steps
         self.lift_speed, self.lift_ramp_steps = lift_speed, lift_ramp_steps
+        self.transfer = transfer
         self.reset()
 
     @classmethod
     def for_env(cls, env: gym.Env, **kwargs: Any) -> ScriptedPicker:
-        """The picker for ``env``'s tool, at ``env``'s action scales."""
+        """The picker for ``env``'s tool, at ``env``'s action scales, with a joint-space transfer
+        where ``env``'s robot asks for one (``approach="joint"``)."""
         u = env.unwrapped
         picker = HandPicker if u.tool == "hand" else ScriptedPicker
+        if u.robot_cfg.approach == "joint":
+            kwargs.setdefault("transfer", JointSpaceTransfer.for_env(env))
         return picker(u.ctrl_cfg.max_linear_speed, u.ctrl_cfg.max_angular_speed, u.control_dt, **kwargs)
 
     def reset(self) -> None:
         self.phase = "approach"
+        self.planned = False  # whether this episode's approach has planned its transfer
         self.count = 0
         self.descended = 0.0
         self.lift_count = 0
@@ -101,7 +118,8 @@ class ScriptedPicker:
     def view(obs: dict[str, np.ndarray]) -> _View:
         """What the phases read from ``obs`` (the pose is ``obs["target_pose"]``)."""
         axis = obs["target_pose"][3:]
-        return _View(p=obs["tool_pose"][:3], z=_tool_axis(obs["tool_pose"][3:]),
+        rot = _tool_rotation(obs["tool_pose"][3:])
+        return _View(p=obs["tool_pose"][:3], rot=rot, z=rot[:, 2], q=obs["joint_pos"],
                      c=obs["target_pose"][:3], axis=axis / np.linalg.norm(axis),
                      held=bool(obs["suction"][1] > 0.5))
 
@@ -113,6 +131,12 @@ class ScriptedPicker:
         return 3.0 * np.cross(o.z, -o.axis)
 
     def _approach(self, o: _View) -> np.ndarray:
+        if self.transfer is not None:
+            if not self.planned:
+                self.planned = True
+                self.transfer.plan(o.q, o.c, o.axis, float((self.approach_goal(o) - o.c) @ o.axis))
+            if not self.transfer.done:
+                return self._action(*self.transfer.twist(o.p, o.rot), self.approach_command)
         err = self.approach_goal(o) - o.p
         ang = np.degrees(np.arccos(np.clip(o.z @ -o.axis, -1, 1)))
         if np.linalg.norm(err) < 0.003 and ang < 3.0:

@@ -22,7 +22,7 @@ SMALL = SceneConfig().replace(placement__num_mushrooms=10)
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_the_exact_pose_scripted_picker_picks_with_every_link_colliding(robot):
     env = gym.make("SMS3DPick-v1", robot=robot, scene=SMALL)
-    results = [run_episode(env, ScriptedPicker(), seed) for seed in range(1_000_000, 1_000_004)]
+    results = [run_episode(env, ScriptedPicker.for_env(env), seed) for seed in range(1_000_000, 1_000_004)]
     assert sum(r["success"] for r in results) >= 3, results
     assert all(r["failure_cause"] != "not_reached" for r in results)
 

@@ -84,6 +84,7 @@ def test_home_lies_within_the_joint_limits_and_points_the_tool_down(name, tool):
     (lambda: RobotConfig(cup_radius=0.1), "RobotConfig.cup_radius"),
     (lambda: RobotConfig(home_q=(0.0,) * 5), "RobotConfig.home_q"),
     (lambda: RobotConfig(tool_tilt_deg=120.0), "RobotConfig.tool_tilt_deg"),
+    (lambda: RobotConfig(approach="straight"), "RobotConfig.approach"),
     (lambda: GantryConfig(tool="gripper"), "GantryConfig.tool"),
     (lambda: GantryConfig(home_q=(0.0,) * 7), "GantryConfig.home_q"),
     (lambda: GantryConfig(lift_force=0.0), "GantryConfig.lift_force"),
