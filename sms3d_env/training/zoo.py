@@ -1,5 +1,5 @@
 """RL Baselines3 Zoo (``rl_zoo3``) and this package: the shipped RL recipes are RL Zoo
-hyperparameter files (``sms3d_env/recipes/<name>.yml``) that ``sms3d train-policy --conf-file``
+hyperparameter files (``sms3d_env/recipes/<name>.yml``) that ``sms3d train-policy RECIPE``
 reads too (:func:`recipe_fields`), and a model that ``python -m rl_zoo3.train`` saved runs as a
 picker (:func:`zoo_run_of`, used by :class:`~sms3d_env.training.actor.PolicyActor`).
 
@@ -238,7 +238,9 @@ def recipe_fields(path: Path, env_id: str | None = None) -> tuple[str, dict[str,
 
 
 def with_recipe(cfg: Any, recipe: str | Path) -> Any:
-    """``cfg`` (a ``TrainConfig``) with the fields that ``recipe`` (a file, or a shipped recipe's
+    """Deprecated (2026-12-06), removed after 2027-06-06: use ``read_recipe(recipe).config``.
+
+    ``cfg`` (a ``TrainConfig``) with the fields that ``recipe`` (a file, or a shipped recipe's
     name) sets; its entry is ``cfg.env_id``'s when the file has one, else its only one. A field
     that ``cfg`` sets to neither its default nor the recipe's value is a ``RecipeError`` (a flag
     given beside the file); the result is validated as any ``TrainConfig``."""
