@@ -27,11 +27,17 @@ class _Loader(yaml.SafeLoader):
     """Safe YAML with YAML 1.2 exponent floats, mappings kept as ``_Pairs``."""
 
 
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."),
-)
+#: A number in exponent notation (``3e-4``, ``1.5E+3``): a float in YAML 1.2 and JSON, a string in
+#: the YAML 1.1 that PyYAML reads; add it to a loader with :func:`read_exponent_floats`.
+EXPONENT_FLOAT = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$")
+
+
+def read_exponent_floats(loader: type[yaml.SafeLoader]) -> None:
+    """Make ``loader`` (a ``SafeLoader`` subclass) read :data:`EXPONENT_FLOAT` numbers as floats."""
+    loader.add_implicit_resolver("tag:yaml.org,2002:float", EXPONENT_FLOAT, list("-+0123456789."))
+
+
+read_exponent_floats(_Loader)
 _Loader.add_constructor("tag:yaml.org,2002:map", lambda loader, node: _Pairs(loader.construct_pairs(node, deep=True)))
 
 
@@ -80,3 +86,14 @@ def parse_config_value(text: str, source: str) -> Any:
         return _unique(yaml.load(text, Loader=_Loader), source)
     except yaml.YAMLError as exc:
         raise ConfigError(source, f"cannot parse {text!r}: {exc}") from exc
+
+
+def shipped_or_file(name_or_path: str | Path, folder: Path) -> Path:
+    """A shipped file by name (``folder/<name>.yml``) or a file's path; ``FileNotFoundError``
+    naming it, and the shipped names, when there is neither."""
+    shipped = folder / f"{name_or_path}.yml"
+    path = shipped if shipped.is_file() else Path(name_or_path)
+    if not path.is_file():
+        names = sorted(p.stem for p in folder.glob("*.yml"))
+        raise FileNotFoundError(f"no recipe file {name_or_path} (shipped recipes: {', '.join(names)})")
+    return path

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from generator.config_file import read_config_file
+from generator.config_file import read_config_file, shipped_or_file
 from generator.errors import ConfigError
 from perception.errors import PerceptionConfigError
 
@@ -240,12 +240,7 @@ def _unique_names(items: Sequence[RecipeDataset | TrainingStep], source: str, ke
 def recipe_path(name_or_path: str | Path) -> Path:
     """A shipped recipe by name (``"axis_cnn"``: ``perception/recipes/axis_cnn.yml``) or a recipe
     file's path; ``FileNotFoundError`` naming it when there is neither."""
-    shipped = RECIPES_DIR / f"{name_or_path}.yml"
-    path = shipped if shipped.is_file() else Path(name_or_path)
-    if not path.is_file():
-        names = sorted(p.stem for p in RECIPES_DIR.glob("*.yml"))
-        raise FileNotFoundError(f"no recipe file {name_or_path} (shipped recipes: {', '.join(names)})")
-    return path
+    return shipped_or_file(name_or_path, RECIPES_DIR)
 
 
 def read_recipe(name_or_path: str | Path) -> NetworkRecipe:

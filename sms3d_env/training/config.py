@@ -47,6 +47,13 @@ REMOVED_FIELDS = {
                  "critic_warmup_steps", "use_sde", "sde_sample_freq")}
 
 
+def removed_fields_set(values: dict[str, Any]) -> list[str]:
+    """The :data:`REMOVED_FIELDS` that ``values`` (a run's config.json, a recipe) sets to anything
+    but their old defaults (None, False, 0, -1: what older runs record for an option left off)."""
+    return sorted(name for name, value in values.items() if name in REMOVED_FIELDS
+                  and value not in (None, False, 0, -1))
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Everything a training run depends on (saved as ``config.json`` next to the model).
@@ -299,9 +306,9 @@ class TrainConfig:
         """The config a run's ``config.json`` records; ``ValueError`` naming a field that
         :data:`REMOVED_FIELDS` lists when the run set it (the policy would train or act
         otherwise than recorded)."""
-        for name, value in d.items():
-            if name in REMOVED_FIELDS and value not in (None, False, 0, -1):
-                raise ValueError(f"TrainConfig.{name}={value!r}: {REMOVED_FIELDS[name]}")
+        removed = removed_fields_set(d)
+        if removed:
+            raise ValueError(f"TrainConfig.{removed[0]}={d[removed[0]]!r}: {REMOVED_FIELDS[removed[0]]}")
         known = {f.name for f in fields(cls)}
         kw = {k: v for k, v in d.items() if k in known}
         if "net_arch" in kw:

@@ -23,7 +23,9 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-from sms3d_env.training.config import REMOVED_FIELDS, TrainConfig
+from generator.config_file import parse_config_value
+from generator.errors import ConfigError
+from sms3d_env.training.config import REMOVED_FIELDS, TrainConfig, removed_fields_set
 from sms3d_env.training.zoo import RecipeError, read_zoo_yaml, recipe_fields, recipe_path
 
 #: What ``sms3d train-policy`` trains: PPO/SAC from scratch, a residual on the scripted picker,
@@ -112,40 +114,28 @@ def read_recipe(name_or_path: str | Path) -> Recipe:
     if kind not in (*KINDS, TRIGGER_KIND):
         raise RecipeError(f"{path}: recipe: must be one of {', '.join((*KINDS, TRIGGER_KIND))}, got {kind!r}")
     values = {k: v for k, v in data.items() if k not in RECORD_ONLY_KEYS[kind]}
-    for name in sorted(set(values) & set(REMOVED_FIELDS)):
-        if values.pop(name) not in (None, False, 0, -1):  # a run's config.json records them at their defaults
-            raise RecipeError(f"{path}: {name}: {REMOVED_FIELDS[name]}")
+    removed = removed_fields_set(values)
+    if removed:
+        raise RecipeError(f"{path}: {removed[0]}: {REMOVED_FIELDS[removed[0]]}")
+    values = {k: v for k, v in values.items() if k not in REMOVED_FIELDS}  # older runs record them at defaults
     recipe = default_recipe(kind).with_fields(values, str(path))
     if (kind == "residual") != (getattr(recipe.config, "residual_scale", 0.0) > 0):
         raise RecipeError(f"{path}: residual_scale: must be > 0 for a residual recipe and 0 for an rl one")
     return replace(recipe, source=str(path))
 
 
-def parse_field_value(text: str) -> Any:
-    """A ``--hyperparams`` value as YAML reads it (``[64, 64]``, ``true``, ``null``), with
-    numbers in exponent notation (``3e-4``, which YAML 1.1 leaves a string) as numbers."""
-    import yaml
-
-    try:
-        value = yaml.safe_load(text)
-    except yaml.YAMLError:
-        return text
-    if isinstance(value, str):
-        for number in (int, float):
-            try:
-                return number(value)
-            except ValueError:
-                pass
-    return value
-
-
 def parse_hyperparams(items: list[str]) -> dict[str, Any]:
-    """``["learning_rate=1e-4", "net_arch=[64, 64]"]`` as a mapping; ``RecipeError`` naming an
-    item without ``=``."""
+    """``["learning_rate=1e-4", "net_arch=[64, 64]"]`` as a mapping, each value read as a
+    configuration file holds it (:func:`generator.config_file.parse_config_value`: ``3e-4`` a
+    number, ``[64, 64]`` a list, ``null``, ``true``); ``RecipeError`` naming an item without
+    ``=`` or whose value does not parse."""
     out: dict[str, Any] = {}
     for item in items:
         key, sep, text = item.partition("=")
         if not sep or not key.strip():
             raise RecipeError(f"--hyperparams {item!r}: must be KEY=VALUE (e.g. learning_rate=1e-4)")
-        out[key.strip()] = parse_field_value(text.strip())
+        try:
+            out[key.strip()] = parse_config_value(text.strip(), f"--hyperparams {key.strip()}")
+        except ConfigError as exc:
+            raise RecipeError(str(exc)) from None
     return out

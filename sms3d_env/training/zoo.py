@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import io
 import pickle
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from generator.config_file import read_exponent_floats, shipped_or_file
 from sms3d_env.env_args import translate_legacy_options
 from sms3d_env.training.model_files import ObservationStats, PolicyFileError, RunningStats
 from sms3d_env.training.policy_spec import PolicySpec
@@ -57,33 +57,24 @@ class RecipeError(ValueError):
 def recipe_path(name_or_path: str | Path) -> Path:
     """A shipped recipe by name (``"ppo"``: ``sms3d_env/recipes/ppo.yml``) or a recipe file's path
     (``FileNotFoundError`` naming it when there is neither)."""
-    shipped = RECIPES_DIR / f"{name_or_path}.yml"
-    path = shipped if shipped.is_file() else Path(name_or_path)
-    if not path.is_file():
-        names = sorted(p.stem for p in RECIPES_DIR.glob("*.yml"))
-        raise FileNotFoundError(f"no recipe file {name_or_path} (shipped recipes: {', '.join(names)})")
-    return path
+    return shipped_or_file(name_or_path, RECIPES_DIR)
 
 
 #: RL Zoo's one Python tag: its ``yaml.dump`` of an ``OrderedDict`` (``config.yml``, ``args.yml``).
 ORDERED_DICT_TAG = "tag:yaml.org,2002:python/object/apply:collections.OrderedDict"
 
 
-#: A number in exponent notation without a dot (``3e-4``, JSON's ``3e-05``): a float in YAML 1.2
-#: and JSON, a string in the YAML 1.1 that PyYAML reads.
-EXPONENT_FLOAT = re.compile(r"^[-+]?[0-9]+[eE][-+]?[0-9]+$")
-
-
 def _safe_zoo_yaml(text: str) -> Any:
     """YAML as ``yaml.safe_load`` reads it, plus :data:`ORDERED_DICT_TAG` read as a plain mapping
-    (its ``[[key, value], ...]`` argument) and :data:`EXPONENT_FLOAT` numbers read as floats (a
-    run's ``config.json`` writes rates so); any other Python tag stays refused."""
+    (its ``[[key, value], ...]`` argument) and exponent-notation numbers read as floats (a run's
+    ``config.json`` writes rates so; :data:`generator.config_file.EXPONENT_FLOAT`); any other
+    Python tag stays refused."""
     import yaml
 
     class Loader(yaml.SafeLoader):
         pass
 
-    Loader.add_implicit_resolver("tag:yaml.org,2002:float", EXPONENT_FLOAT, list("-+0123456789"))
+    read_exponent_floats(Loader)
 
     def ordered_dict(loader: Any, node: Any) -> dict[str, Any]:
         (pairs,) = loader.construct_sequence(node, deep=True)

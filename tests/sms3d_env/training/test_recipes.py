@@ -14,7 +14,6 @@ from hypothesis import strategies as st
 from sms3d_env.training import BCConfig, TrainConfig
 from sms3d_env.training.recipes import (
     default_recipe,
-    parse_field_value,
     parse_hyperparams,
     read_recipe,
 )
@@ -75,7 +74,7 @@ def test_numbers_given_by_hand_are_read_as_numbers(number):
     """``--hyperparams learning_rate=3e-4``: a number in any notation is a number (YAML 1.1 reads
     ``3e-4`` as a string)."""
     for text in (repr(number), f"{number:e}", str(number)):
-        assert parse_field_value(text) == pytest.approx(number), text
+        assert parse_hyperparams([f"learning_rate={text}"])["learning_rate"] == pytest.approx(number), text
 
 
 def test_rates_in_exponent_notation_are_numbers_in_a_recipe_file(tmp_path):
