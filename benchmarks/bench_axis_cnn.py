@@ -38,7 +38,7 @@ def median_ms(run, repeats: int) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="torch intra-op threads to time")
     p.add_argument("--mushrooms", type=int, default=40)
     p.add_argument("--seed", type=int, default=424242)

@@ -92,7 +92,7 @@ def measure(camera_model: bool, views: int, tilts: list[float], seed: int, model
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--views", type=int, default=200)
     ap.add_argument("--tilts", type=float, nargs="+", default=[3.0, 6.0, 10.0, 15.0])
     ap.add_argument("--seed", type=int, default=5000)

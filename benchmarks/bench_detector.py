@@ -42,7 +42,7 @@ def median_ms(fn, repeats: int) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", required=True, help="a dataset folder from `sms3d generate` (640 x 480)")
     p.add_argument("--split", default="test")
     p.add_argument("--checkpoint", help="a trained mobilenet_v3_fpn detector for the pipeline rows")

@@ -18,7 +18,7 @@ import gymnasium as gym
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--env", default="FetchPickAndPlace-v4")
     args = ap.parse_args()

@@ -52,7 +52,7 @@ def run(picker_text: str, beds: list[int], episodes: int, error: float, seed: in
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--pickers", nargs="+", default=["scripted", "policy"])
     ap.add_argument("--episodes", type=int, default=100, help="episodes per bed size")
     ap.add_argument("--beds", type=int, nargs="+", default=[10, 25], help="mushrooms per bed")

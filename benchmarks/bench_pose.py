@@ -41,7 +41,7 @@ def weights_mb(model: PoseNet) -> float:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--threads", type=int, default=2, help="intra-op threads (torch.set_num_threads)")
     p.add_argument("--workers", type=int, default=1, help="threads a batch is split over (PoseEstimator workers)")
     p.add_argument("--repeats", type=int, default=20)

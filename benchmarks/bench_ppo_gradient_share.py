@@ -85,7 +85,7 @@ def gradient_share(run: Path, steps: int, seed: int) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("run", type=Path, help="a PPO run folder (config.json, checkpoints/)")
     parser.add_argument("--steps", type=int, nargs="+", required=True, help="checkpoints (env steps)")
     parser.add_argument("--seed", type=int, default=123, help="env seeds of the rollout (seed + i)")

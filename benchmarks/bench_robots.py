@@ -19,6 +19,7 @@ import os
 from multiprocessing import get_context
 
 import numpy as np
+from tqdm import tqdm
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -57,7 +58,7 @@ def _cell(args: tuple[str, float, int, int]) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--robots", nargs="+", default=["gantry", "jaco"])
     parser.add_argument("--errors", type=float, nargs="+", default=[0.0, 10.0, 20.0, 30.0])
@@ -68,7 +69,8 @@ def main() -> None:
     args = parser.parse_args()
     cells = [(r, e, args.episodes, args.substeps) for r in args.robots for e in args.errors]
     with get_context("spawn").Pool(args.workers) as pool:
-        rows = pool.map(_cell, cells)
+        # imap keeps the cells' order; the bar counts finished (robot, error) cells.
+        rows = list(tqdm(pool.imap(_cell, cells), total=len(cells), desc="robot x error cells"))
     print("| robot | error (deg) | success | failures | cycle time median / p90 (s) |")
     print("| --- | --- | --- | --- | --- |")
     for row in rows:

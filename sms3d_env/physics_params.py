@@ -42,6 +42,19 @@ class PickPhysicsParams:
         lift_height: height the target must be lifted above its starting cap top (m). ASSUMPTION.
         settle_time: simulated seconds after reset before detachment is checked (the soft welds
             take up gravity).
+        seal_response_time: time constant (s) of the seal's load as the grip-loss rule reads it
+            (a first-order low-pass of the load per physics step; 0 reads each step's load).
+            ASSUMPTION (no published peel time for a suction cup): a seal peels when its lip
+            lifts and air flows in, which takes milliseconds, not the one physics step of an
+            impulse; 20 ms is the order of a vacuum cup's pressure response. Read per physics
+            step, the load peaked for one step when a mushroom's root let go, and the Jaco's
+            success at 20-30 degrees depended on the step size (1 ms: 399/386 of 400, 2 ms:
+            390/375, 4 ms: 386/358).
+        seal_preload: the cup's pressing force on the cap adds to the normal force behind the
+            seal's shear, bending and twist capacities (statics of a lip pressed on a surface;
+            Dex-Net 3.0's suction contact model, Mahler et al. 2018, bounds friction and torsion
+            by the normal force, vacuum included). False: the capacities of the holding force
+            alone (v0).
     """
 
     pull_force: float = 8.0
@@ -57,6 +70,8 @@ class PickPhysicsParams:
     disturb_tolerance: float = 0.005
     lift_height: float = 0.03
     settle_time: float = 0.1
+    seal_response_time: float = 0.02
+    seal_preload: bool = True
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():

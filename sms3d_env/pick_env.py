@@ -49,6 +49,10 @@ _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
 #: ``SMS3DPick-v0``'s collision set: only the mushrooms within this distance (m) of the target
 #: can move (``SceneSourceConfig.free_radius``).
 V0_FREE_RADIUS = 0.10
+#: ``SMS3DPick-v0``'s seal rule: each physics step's load against the holding force's capacities.
+V0_SEAL = {"seal_response_time": 0.0, "seal_preload": False}
+#: ``SMS3DPick-v0``'s control step: 20 physics steps of 2 ms.
+V0_CONTROLLER = {"substeps": 20}
 # State observation entries and their sizes, in the order of the flat vector they are cut from.
 _OBS_SIZES = {"joint_pos": 6, "joint_vel": 6, "tool_pose": 7, "suction": 3, "target_pose": 6,
               "target_rel": 3}
@@ -150,12 +154,17 @@ class SMS3DPickEnv(gym.Env):
       (``SceneSourceConfig.free_radius=None``), so any link that touches a cap is judged by the
       same bruise and disturbed-neighbour rules as the tool. ``info`` gains ``time_s``; the
       failure cause ``not_reached`` separates approaches that stopped short from seals that
-      failed. The constructor's arguments were regrouped into 16, the options of one concern
+      failed. The seal's grip-loss rule reads its load over a 20 ms response time and counts
+      the cup's pressing force in its capacities (``PickPhysicsParams.seal_response_time``,
+      ``seal_preload``), and the physics steps at 4 ms (``ControllerConfig.substeps=10``): read
+      per 2 ms step, one step's load peak when a root let go decided picks, and the outcome
+      depended on the step size. The constructor's arguments were regrouped into 16, the options of one concern
       in one record (``scene``, ``target``, ``reward_type``, ``controller``, ``start``,
       ``image_obs``, ``render_camera``); the same ids make the same episodes.
     - v0: the Jaco beside the bed below the soil line; its base, shoulder, upper arm, forearm and
       first wrist link collide with nothing, and only the mushrooms within 10 cm of the target
-      collide with anything (``free_radius=0.10``, :func:`make_v0_env`). Superseded by v1; its
+      collide with anything (``free_radius=0.10``, :func:`make_v0_env`); 20 physics steps of
+      2 ms per control step, and the seal let go on one step's load. Superseded by v1; its
       measurements stay in the results history.
     """
 
@@ -458,9 +467,16 @@ def make_v0_env(scene: Any = None, **kwargs: Any) -> SMS3DPickEnv:
     """The env of the ``-v0`` ids (their entry point): ``SMS3DPickEnv(**kwargs)`` (v0's Jaco
     unless ``robot`` says otherwise) with only the mushrooms within ``V0_FREE_RADIUS`` of the
     target free, whatever bed ``scene`` gives (a ``SceneSourceConfig`` with a ``free_radius`` of
-    its own keeps it): a ``scene`` passed to ``gym.make`` replaces the registered one whole, so the
-    v0 radius cannot be a registered argument."""
+    its own keeps it; a ``scene`` passed to ``gym.make`` replaces the registered one whole, so the
+    v0 radius cannot be a registered argument), and, unless ``physics`` or ``controller`` is
+    given, v0's seal rule (``V0_SEAL``) and physics step (``V0_CONTROLLER``)."""
     source = scene_source_config(scene)
     if source.free_radius is None:
         source = replace(source, free_radius=V0_FREE_RADIUS)
+    if kwargs.get("controller") is None:
+        kwargs["controller"] = ControllerConfig(**V0_CONTROLLER)
+    if kwargs.get("physics") is None:
+        robot = kwargs.get("robot")
+        cup_radius = (RobotConfig() if robot is None else make_robot(robot)).cup_radius
+        kwargs["physics"] = PickPhysicsParams(cup_radius=cup_radius, **V0_SEAL)
     return SMS3DPickEnv(scene=source, **kwargs)

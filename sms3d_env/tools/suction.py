@@ -5,13 +5,15 @@
 | valve: on while the command is > 0; latched (training option): held once sealed | ``Suction.command`` | |
 | seal: cup on a cap top, within the seal angle, pressed with the seal force, suction on | ``on_contact`` / ``seals`` | ``PickPhysicsParams.seal_angle_deg``, ``seal_region``, ``seal_force`` |
 | grip: the seal is a weld anchored at the contact; released when the valve closes | ``grip`` / ``release`` | |
-| grip loss: the seal's load against its capacity | ``check_hold`` / ``grip_wrench`` | ``physics.grip_utilisation`` (vacuum x cup area, friction) |
+| grip loss: the seal's load (low-passed) against its capacity | ``check_hold`` / ``grip_wrench`` | ``physics.grip_utilisation`` (vacuum x cup area, friction), ``PickPhysicsParams.seal_response_time`` |
 | dead ends: the target knocked off its roots and not held, or a latched seal on a neighbour | ``dead_end`` | |
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
+
+import math
 
 import mujoco
 import numpy as np
@@ -139,9 +141,13 @@ class Suction:
         force, torque_c, z = self.grip_wrench()
         fz, shear = ph.axial_split(force, z)
         tz, bend = ph.axial_split(torque_c, z)
-        u = ph.grip_utilisation(max(0.0, -fz), shear, bend, abs(tz), self.params)
-        ep.grip_util = u
-        if u >= 1.0:
+        load = ph.grip_utilisation(max(0.0, -fz), shear, bend, abs(tz), self.params, compression=max(0.0, fz))
+        # The seal answers its load over its response time, not one physics step's impulse
+        # (which grows as the step shrinks): a first-order low-pass, exact for any step size.
+        tau = self.params.seal_response_time
+        blend = 1.0 - math.exp(-self.world.model.opt.timestep / tau) if tau > 0 else 1.0
+        ep.grip_util += blend * (load - ep.grip_util)
+        if ep.grip_util >= 1.0:
             if k == ep.target and ep.target_detached:
                 ep.grip_lost = True
             self.release()

@@ -20,7 +20,8 @@ import sms3d_env  # noqa: F401  (registers the env ids)
 from sms3d_env.cameras import ImageObservation, RenderCamera
 from sms3d_env.controller import ControllerConfig
 from sms3d_env.env_args import translate_legacy_options
-from sms3d_env.pick_env import V0_FREE_RADIUS, SMS3DPickEnv
+from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.pick_env import V0_CONTROLLER, V0_FREE_RADIUS, V0_SEAL, SMS3DPickEnv
 from sms3d_env.pose_sources import NoisyPose
 from sms3d_env.records import record_of
 from sms3d_env.rewards import RewardConfig
@@ -66,7 +67,10 @@ def test_the_registered_ids_build_their_options_from_the_records():
         v0 = env_id.endswith("-v0")
         assert env.scene_source.config == SceneSourceConfig(config=SMALL, free_radius=V0_FREE_RADIUS if v0 else None)
         assert env.reward_config.kind == ("staged" if "Train" in env_id else "dense")
-        assert (env.start, env.target_rule, env.ctrl_cfg) == (None, TargetRule(), ControllerConfig())
+        assert (env.start, env.target_rule) == (None, TargetRule())
+        # v0 keeps its 2 ms physics step and per-step seal rule; v1 has the records' defaults.
+        assert env.ctrl_cfg == ControllerConfig(**V0_CONTROLLER if v0 else {})
+        assert env.params == PickPhysicsParams(**V0_SEAL if v0 else {})
         env.close()
     assert type(made["SMS3DPick-v1"].robot_cfg).__name__ == "GantryConfig"
     assert type(made["SMS3DPick-v0"].robot_cfg).__name__ == "RobotConfig"

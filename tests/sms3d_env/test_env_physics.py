@@ -3,9 +3,13 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 import generator
 import sms3d_env
+from sms3d_env.physics import grip_utilisation
+from sms3d_env.pick_env import V0_SEAL
 from sms3d_env.pose_sources import NoisyPose, OraclePose
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
@@ -16,6 +20,27 @@ def test_holding_force_from_vacuum_and_area():
     assert p.holding_force == pytest.approx(20e3 * np.pi * 0.01**2)
     with pytest.raises(ValueError):
         sms3d_env.PickPhysicsParams(seal_angle_deg=95)
+
+
+loads = st.floats(0.0, 10.0)
+
+
+@given(tension=loads, shear=loads, bend=st.floats(0.0, 0.1), twist=st.floats(0.0, 0.05),
+       compression=loads)
+def test_pressing_the_cup_on_the_cap_adds_to_the_seals_capacity(tension, shear, bend, twist, compression):
+    """v1's seal carries shear, bending and twist against the holding force plus the cup's
+    compression of the cap; v0's (``V0_SEAL``) against the holding force alone; tension's
+    capacity is the holding force either way, and each capacity is reached exactly."""
+    v1 = sms3d_env.PickPhysicsParams()
+    v0 = sms3d_env.PickPhysicsParams(**V0_SEAL)
+    load = (tension, shear, bend, twist)
+    assert grip_utilisation(*load, v1, compression) <= grip_utilisation(*load, v1) + 1e-12
+    assert grip_utilisation(*load, v0, compression) == grip_utilisation(*load, v0)
+    normal = v1.holding_force + compression
+    a, mu = v1.cup_radius, v1.shear_friction
+    for capacity in ((v1.holding_force, 0, 0, 0), (0, mu * normal, 0, 0), (0, 0, normal * a / 2, 0),
+                     (0, 0, 0, mu * normal * 2 * a / 3)):
+        assert grip_utilisation(*capacity, v1, compression) == pytest.approx(1.0)
 
 
 def test_noisy_pose_error_is_exact():

@@ -108,11 +108,10 @@ def test_a_dead_end_is_a_target_knocked_off_or_a_latched_seal_on_a_neighbour(mak
     assert Suction(world, PickPhysicsParams(), state, latched).dead_end() is dead
 
 
-def test_env_grip_wrench_is_about_the_cup_contact():
-    """A detached mushroom held by the cup alone, with a known extra load: the env's seal reading
-    is the weight plus the load, and its moment is taken about the cup face, not the stem base."""
+def _held_by_the_cup(env_id: str):
+    """An env whose target is off its roots and sealed to the cup where the cup is now."""
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=4)
-    env = gym.make("SMS3DPick-v0", scene=cfg).unwrapped
+    env = gym.make(env_id, scene=cfg).unwrapped
     env.reset(seed=0)
     m, d = env.model, env.data
     k = env.picking.state.target
@@ -121,7 +120,16 @@ def test_env_grip_wrench_is_about_the_cup_contact():
     qadr = m.jnt_qposadr[m.body_jntadr[b]]
     d.qpos[qadr : qadr + 3] += d.site_xpos[env.world.tool_site] - d.site_xpos[env.world.cap_top_sites[k]]
     mujoco.mj_forward(m, d)
-    env.picking.tool.grip(k, d.site_xpos[env.world.tool_site].copy())  # sealed where the cup is now
+    env.picking.tool.grip(k, d.site_xpos[env.world.tool_site].copy())
+    env.picking.state.target_detached = True
+    return env, k, b
+
+
+def test_env_grip_wrench_is_about_the_cup_contact():
+    """A detached mushroom held by the cup alone, with a known extra load: the env's seal reading
+    is the weight plus the load, and its moment is taken about the cup face, not the stem base."""
+    env, k, b = _held_by_the_cup("SMS3DPick-v0")
+    m, d = env.model, env.data
     m.body_gravcomp[b] = 0.0
     f_app = np.array([0.1, 0.05, -0.2])
     d.xfrc_applied[b, :3] = f_app
@@ -134,3 +142,27 @@ def test_env_grip_wrench_is_about_the_cup_contact():
     pc = d.site_xpos[env.world.tool_site]
     np.testing.assert_allclose(moment, -np.cross(d.xipos[b] - pc, load), atol=2e-4)
     np.testing.assert_allclose(z, d.site_xmat[env.world.tool_site].reshape(3, 3)[:, 2])
+
+
+def _overload_then_rest(env, b: int, force: np.ndarray, steps: int) -> bool:
+    """Pull the held mushroom with ``force`` for ``steps`` physics steps, then 50 ms with none,
+    the seal's rule read after every step as the env does; whether the seal still holds."""
+    m, d, tool = env.model, env.data, env.picking.tool
+    for i in range(steps + round(0.05 / m.opt.timestep)):
+        d.xfrc_applied[b, :3] = force if i < steps else 0.0
+        mujoco.mj_step(m, d)
+        tool.check_hold()
+    return env.picking.state.grip >= 0
+
+
+def test_the_seal_outlasts_a_one_step_impulse_but_not_a_sustained_overload():
+    """The grip-loss rule low-passes the seal's load over ``seal_response_time``: a pull of twice
+    the holding force for one physics step (an impulse that grows as the step shrinks) leaves
+    the seal on; the same pull for 50 ms lets go and counts as a lost grip."""
+    env, k, b = _held_by_the_cup("SMS3DPick-v1")
+    pull = np.array([0.0, 0.0, 2.0 * env.picking.params.holding_force])
+    assert _overload_then_rest(env, b, pull, steps=1)
+    assert 0.0 < env.picking.state.grip_util < 1.0
+    assert not env.picking.state.grip_lost
+    assert not _overload_then_rest(env, b, pull, steps=round(0.05 / env.model.opt.timestep))
+    assert env.picking.state.grip_lost
