@@ -25,14 +25,14 @@ import gymnasium as gym  # noqa: E402
 
 import generator  # noqa: E402
 import sms3d_env  # noqa: E402, F401
+from sms3d_env.controller import ControllerConfig  # noqa: E402
 
 
-def measure(env_id: str, steps: int, image_obs: bool, n: int, pool: int = 0, substeps: int = 20) -> tuple[float, float]:
+def measure(env_id: str, steps: int, image_obs: bool, n: int, pool: int = 0, substeps: int = ControllerConfig.substeps) -> tuple[float, float]:
     """Steps/s with random actions (the time limit's resets included) and the median reset time
     before the timed steps; ``pool`` > 0 draws beds from a pool of that many, every one of them
     generated and compiled before the timing (as in a long training run, whose envs have drawn
     each bed of their pool)."""
-    from sms3d_env.controller import ControllerConfig
     from sms3d_env.scene_source import SceneSourceConfig
 
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
@@ -72,8 +72,8 @@ def main() -> None:
     ap.add_argument("--mushrooms", type=int, default=50)
     ap.add_argument("--resets", type=int, default=20)
     ap.add_argument("--version", choices=("v1", "v0"), default="v1")
-    ap.add_argument("--substeps", type=int, default=20,
-                    help="physics steps per 40 ms control step (ControllerConfig.substeps; default 20 x 2 ms)")
+    ap.add_argument("--substeps", type=int, default=ControllerConfig.substeps,
+                    help="physics steps per 40 ms control step (ControllerConfig.substeps; default 10 x 4 ms)")
     ap.add_argument("--fetch-python", default=None,
                     help="a python with gymnasium-robotics (bench_fetch.py's venv): measure the anchor before and "
                          "after this run's rows and print the ratio")
@@ -89,7 +89,6 @@ def main() -> None:
     rows.append(("state + 64x64 RGB-D", rate_i, reset_i))
     if args.fetch_python:
         fetch.append(fetch_rate(args.fetch_python))
-    from sms3d_env.controller import ControllerConfig
 
     ctrl = ControllerConfig(substeps=args.substeps)
     print(f"{env_id}, {args.mushrooms} mushrooms, {ctrl.control_dt * 1e3:.0f} ms/step ({ctrl.substeps} x "

@@ -4,7 +4,7 @@ percentile), over held-out seeded 25-mushroom beds (seeds from 1,000,000). Each 
 cell runs in a worker process.
 
 Usage: python benchmarks/bench_robots.py [--episodes 200] [--robots gantry jaco]
-       [--errors 0 10 20 30] [--substeps 20] [--workers 2] [--json FILE]
+       [--errors 0 10 20 30] [--substeps 10] [--workers 2] [--json FILE]
 
 ``--json`` also keeps each episode's outcome (success or failure cause, by seed), so that two runs
 that differ in one setting (e.g. ``--substeps``) compare episode by episode.
@@ -21,17 +21,18 @@ from multiprocessing import get_context
 import numpy as np
 from tqdm import tqdm
 
+from sms3d_env.controller import ControllerConfig
+
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 HELD_OUT_SEED = 1_000_000
 
 
-def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = 20) -> dict:
+def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = ControllerConfig.substeps) -> dict:
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the ids)
     from generator import SceneConfig
-    from sms3d_env.controller import ControllerConfig
     from sms3d_env.pickers.episode import run_episode
     from sms3d_env.pickers.scripted import ScriptedPicker
 
@@ -62,8 +63,8 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--robots", nargs="+", default=["gantry", "jaco"])
     parser.add_argument("--errors", type=float, nargs="+", default=[0.0, 10.0, 20.0, 30.0])
-    parser.add_argument("--substeps", type=int, default=20,
-                        help="physics steps per 40 ms control step (ControllerConfig.substeps; default 20 x 2 ms)")
+    parser.add_argument("--substeps", type=int, default=ControllerConfig.substeps,
+                        help="physics steps per 40 ms control step (ControllerConfig.substeps; default 10 x 4 ms)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", default=None, help="also write the rows here")
     args = parser.parse_args()

@@ -49,7 +49,7 @@ class PickPhysicsParams:
             impulse; 20 ms is the order of a vacuum cup's pressure response. Read per physics
             step, the load peaked for one step when a mushroom's root let go, and the Jaco's
             success at 20-30 degrees depended on the step size (1 ms: 399/386 of 400, 2 ms:
-            390/375, 4 ms: 386/358).
+            390/375, 4 ms: 386/358); with this and ``seal_preload``, 400/399, 400/400, 399/400.
         seal_preload: the cup's pressing force on the cap adds to the normal force behind the
             seal's shear, bending and twist capacities (statics of a lip pressed on a surface;
             Dex-Net 3.0's suction contact model, Mahler et al. 2018, bounds friction and torsion
