@@ -34,8 +34,9 @@ class PickPhysicsParams:
         seal_region: the contact must lie within this fraction of the cap radius from the stem
             axis (the cap top, not its softer, curved rim). ASSUMPTION.
         seal_force: cup-on-cap normal force needed to form a seal (N). ASSUMPTION.
-        shear_friction: shear capacity of the seal as a fraction of the holding force.
-            ASSUMPTION (rubber on a moist cap).
+        shear_friction: shear capacity of the seal as a fraction of its normal force (the
+            holding force, plus the cup's pressing force with ``seal_preload``). ASSUMPTION
+            (rubber on a moist cap).
         bruise_force: cap contact normal force that bruises (N). ASSUMPTION: docs/physics.md
             reports no numeric bruising threshold.
         disturb_tolerance: a neighbour moved further than this (m) counts as disturbed. ASSUMPTION.
