@@ -475,8 +475,7 @@ def make_v0_env(scene: Any = None, **kwargs: Any) -> SMS3DPickEnv:
         source = replace(source, free_radius=V0_FREE_RADIUS)
     if kwargs.get("controller") is None:
         kwargs["controller"] = ControllerConfig(**V0_CONTROLLER)
-    if kwargs.get("physics") is None:
-        robot = kwargs.get("robot")
-        cup_radius = (RobotConfig() if robot is None else make_robot(robot)).cup_radius
-        kwargs["physics"] = PickPhysicsParams(cup_radius=cup_radius, **V0_SEAL)
-    return SMS3DPickEnv(scene=source, **kwargs)
+    env = SMS3DPickEnv(scene=source, **kwargs)
+    if kwargs.get("physics") is None:  # the env's defaults for its robot, with v0's seal rule
+        env.params = replace(env.params, **V0_SEAL)
+    return env

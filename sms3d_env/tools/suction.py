@@ -44,6 +44,11 @@ class Suction:
                  latched: bool = False) -> None:
         self.world, self.params, self.state, self.latched = world, params, state, latched
         self._qfrc = np.zeros(world.model.nv)
+        # The seal answers its load over its response time, not one physics step's impulse
+        # (which grows as the step shrinks): a first-order low-pass, exact for any step size,
+        # whose weight per physics step is fixed by the world's step.
+        tau = params.seal_response_time
+        self._load_blend = 1.0 - math.exp(-world.model.opt.timestep / tau) if tau > 0 else 1.0
 
     def reset(self) -> None:
         pass
@@ -141,11 +146,7 @@ class Suction:
         fz, shear = ph.axial_split(force, z)
         tz, bend = ph.axial_split(torque_c, z)
         load = ph.grip_utilisation(max(0.0, -fz), shear, bend, abs(tz), self.params, compression=max(0.0, fz))
-        # The seal answers its load over its response time, not one physics step's impulse
-        # (which grows as the step shrinks): a first-order low-pass, exact for any step size.
-        tau = self.params.seal_response_time
-        blend = 1.0 - math.exp(-self.world.model.opt.timestep / tau) if tau > 0 else 1.0
-        ep.grip_util += blend * (load - ep.grip_util)
+        ep.grip_util += self._load_blend * (load - ep.grip_util)
         if ep.grip_util >= 1.0:
             if k == ep.target and ep.target_detached:
                 ep.grip_lost = True
