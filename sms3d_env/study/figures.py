@@ -14,6 +14,8 @@ from typing import Any
 
 from generator.files import write_atomic
 
+ORIENTATION_LABEL = "orientation error θ (degrees, rotation perpendicular to the stem)"
+
 
 def save_figure(fig: Any, path: str | Path) -> None:
     """Write a matplotlib figure as PNG atomically and close it."""
@@ -53,8 +55,25 @@ def distinct_names(paths: Sequence[str | Path]) -> list[str]:
     return names
 
 
+def draw_curve(ax: Any, table: Sequence[dict[str, Any]], label: str, **style: Any) -> None:
+    """One success-vs-error line of a ``success_table`` on ``ax``: percent with its 95 % Wilson
+    interval as error bars, ``n`` per error in the label; ``style`` goes to ``errorbar``."""
+    y = [100 * t["success"] for t in table]
+    err = [[100 * (t["success"] - t["ci_low"]) for t in table], [100 * (t["ci_high"] - t["success"]) for t in table]]
+    ax.errorbar([t["error_deg"] for t in table], y, yerr=err, capsize=3,
+                label=f"{label} (n = {min(t['n'] for t in table)}/error)", **{"marker": "o", **style})
+
+
+def success_axes(ax: Any, xlabel: str = ORIENTATION_LABEL) -> None:
+    """Label ``ax`` as pick success (%) against ``xlabel``, 0–105 %, with a light grid."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("pick success (%)")
+    ax.set_ylim(0, 105)
+    ax.grid(alpha=0.3)
+
+
 def plot_curves(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path, title: str,
-                xlabel: str = "orientation error θ (degrees, rotation perpendicular to the stem)") -> None:
+                xlabel: str = ORIENTATION_LABEL) -> None:
     """Success vs orientation error with 95 % Wilson intervals, one line per label; each value
     is a ``success_table`` of one slice."""
     import matplotlib
@@ -64,14 +83,8 @@ def plot_curves(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path, t
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for label, table in curves.items():
-        y = [100 * t["success"] for t in table]
-        err = [[100 * (t["success"] - t["ci_low"]) for t in table], [100 * (t["ci_high"] - t["success"]) for t in table]]
-        ax.errorbar([t["error_deg"] for t in table], y, yerr=err, marker="o", capsize=3,
-                    label=f"{label} (n = {min(t['n'] for t in table)}/error)")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("pick success (%)")
-    ax.set_ylim(0, 105)
-    ax.grid(alpha=0.3)
+        draw_curve(ax, table, label)
+    success_axes(ax, xlabel)
     ax.legend(fontsize=8, loc="lower left")
     ax.set_title(title)
     fig.tight_layout()

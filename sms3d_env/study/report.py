@@ -15,7 +15,7 @@ import numpy as np
 from generator.files import write_atomic
 from sms3d_env.pickers.registry import picker_name
 from sms3d_env.study import success_map
-from sms3d_env.study.figures import plot_curves, save_figure
+from sms3d_env.study.figures import ORIENTATION_LABEL, draw_curve, plot_curves, save_figure
 from sms3d_env.study.statistics import (
     TILTED_DEG,
     WITHIN_PP,
@@ -56,12 +56,7 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     table = success_table(rows)
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 7.5), sharex=True, height_ratios=[3, 2])
     for variant in dict.fromkeys(r["variant"] for r in table):
-        sub = [r for r in table if r["variant"] == variant]
-        x = [r["error_deg"] for r in sub]
-        y = [100 * r["success"] for r in sub]
-        lo = [100 * (r["success"] - r["ci_low"]) for r in sub]
-        hi = [100 * (r["ci_high"] - r["success"]) for r in sub]
-        top.errorbar(x, y, yerr=[lo, hi], marker="o", capsize=3, label=variant, lw=2 if variant == "default" else 1)
+        draw_curve(top, [r for r in table if r["variant"] == variant], variant, lw=2 if variant == "default" else 1)
     for label, err in PAPER_ERRORS_DEG.items():
         top.axvline(err, ls=":", color="grey")
         top.text(err, 30, f" {label}: {err}°", fontsize=7, color="grey", rotation=90, va="bottom")
@@ -90,7 +85,7 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
         share = np.array([100 * r["causes"].get(cause, 0) / r["n"] for r in default])
         bottom.bar(x, share, width=width, bottom=bottom_acc, label=cause)
         bottom_acc += share
-    bottom.set_xlabel("orientation error θ (degrees, rotation perpendicular to the stem)")
+    bottom.set_xlabel(ORIENTATION_LABEL)
     bottom.set_ylabel("failures (% of episodes)")
     bottom.grid(alpha=0.3)
     if causes:

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from sms3d_env.study.figures import plot_curves, save_figure
+from sms3d_env.study.figures import draw_curve, plot_curves, save_figure, success_axes
 from sms3d_env.study.statistics import (
     TILTED_DEG,
     WITHIN_PP,
@@ -25,6 +25,8 @@ from sms3d_env.study.statistics import (
 )
 
 ISO_POINTS = (2.0, 5.0, 10.0)  # iso-lines of the map: oracle success minus these many points
+TOOL_LINE_STYLES = ("-", "--", ":")
+TOOL_MARKERS = ("o", "s", "^")
 
 
 def success_grid(rows: Sequence[dict[str, Any]], variant: str = "default",
@@ -137,13 +139,47 @@ def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, panel: str = "", 
 
 def plot_slices(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
     """Success vs orientation error (no position error, default physics), one line per (robot,
-    tool, bed size) that the sweep ran."""
-    curves = {}
+    tool, bed size) that the sweep ran: on one plot when only the robot varies, else one panel
+    per robot with a colour per bed size and a line style per tool."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tables = {}
     for key, group in panels(rows).items():
         table = [t for t in success_table(group) if t["variant"] == "default" and t["position_error_mm"] == 0.0]
         if table:
-            curves[panel_label(key)] = table
-    plot_curves(curves, path, "Slices: success vs orientation error per robot, tool and bed size")
+            tables[key] = table
+    robots = list(dict.fromkeys(robot for robot, _, _ in tables))
+    if len({(tool, size) for _, tool, size in tables}) <= 1:
+        plot_curves({panel_label(key): table for key, table in tables.items()}, path,
+                    "Success vs orientation error per robot")
+        return
+    sizes = sorted({size for _, _, size in tables})
+    tools = sorted({tool for _, tool, _ in tables})
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(sizes)))
+    fig, axs = plt.subplots(1, len(robots), figsize=(5.5 * len(robots), 5), sharey=True, squeeze=False)
+    # Curves that coincide (every suction cell at 100 %) stay visible: each is nudged sideways by
+    # a fraction of the error spacing.
+    errors = sorted({t["error_deg"] for table in tables.values() for t in table})
+    spacing = min(np.diff(errors)) if len(errors) > 1 else 1.0
+    for ax, robot in zip(axs[0], robots):
+        for (r, tool, size), table in tables.items():
+            if r != robot:
+                continue
+            k = tools.index(tool) * len(sizes) + sizes.index(size)
+            nudged = [{**t, "error_deg": t["error_deg"] + spacing * 0.03 * (k - len(tools) * len(sizes) / 2)}
+                      for t in table]
+            draw_curve(ax, nudged, f"{tool}, {size} mushrooms", color=colours[sizes.index(size)],
+                       ls=TOOL_LINE_STYLES[tools.index(tool) % len(TOOL_LINE_STYLES)],
+                       marker=TOOL_MARKERS[tools.index(tool) % len(TOOL_MARKERS)])
+        success_axes(ax)
+        ax.set_title(f"{robot}")
+        ax.legend(fontsize=8, loc="lower left")
+    fig.suptitle("Success vs orientation error per tool and bed size (exact cap top, 95 % intervals)")
+    fig.tight_layout()
+    save_figure(fig, path)
 
 
 def panels(rows: Sequence[dict[str, Any]]) -> dict[tuple[str, str, int], list[dict[str, Any]]]:
