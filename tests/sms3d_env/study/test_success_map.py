@@ -53,6 +53,31 @@ def test_the_map_report_states_the_region_and_draws(tmp_path):
     assert md.count("| default |") == 3  # all, tilted, crowded
 
 
+def test_slices_over_robots_tools_and_beds_draw_a_panel_per_robot(tmp_path, monkeypatch):
+    from sms3d_env.study import figures as study_figures
+    from sms3d_env.study import success_map
+
+    figures = []
+    for module in (success_map, study_figures):
+        monkeypatch.setattr(module, "save_figure", lambda fig, path: figures.append(fig))
+    curve = {(0.0, 0.0): 20, (10.0, 0.0): 15}
+    rows = [{**r, "robot": robot} for robot in ("gantry", "jaco") for tool in ("suction", "hand")
+            for size in (10, 100) for r in _cell_rows(curve, tool=tool, size=size)]
+    success_map.plot_slices(rows, tmp_path / "slices.png")
+    (fig,) = figures
+    assert [ax.get_title() for ax in fig.axes] == ["gantry", "jaco"]
+    for ax in fig.axes:  # a line per (tool, bed size), labelled with both
+        labels = ax.get_legend_handles_labels()[1]
+        assert sorted(label.split(" (n")[0] for label in labels) == [
+            "hand, 10 mushrooms", "hand, 100 mushrooms", "suction, 10 mushrooms", "suction, 100 mushrooms"]
+    # Only the robot varies: one plot, a line per robot.
+    figures.clear()
+    success_map.plot_slices([r for r in rows if r["tool"] == "suction" and r["num_mushrooms"] == 10],
+                            tmp_path / "robots.png")
+    (fig,) = figures
+    assert len(fig.axes) == 1 and len(fig.axes[0].get_legend_handles_labels()[1]) == 2
+
+
 def test_position_error_moves_the_cap_top_by_exactly_that_distance_across_the_estimated_axis():
     scene = generate_scene(SceneConfig().replace(placement__num_mushrooms=6), seed=1)
     truth = OraclePose()(scene, 0, np.random.default_rng(0))
