@@ -151,7 +151,8 @@ class IKController:
         return self.configuration.q[self.arm_qadr]
 
     def step(self, twist: np.ndarray, q_measured: np.ndarray) -> np.ndarray:
-        """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period."""
+        """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period;
+        ``mink.exceptions.NoSolutionFound`` when the QP has no solution."""
         q = self.configuration.q
         gap = q[self.arm_qadr] - q_measured
         if (np.abs(gap) > self.max_lead + 1e-8).any():

@@ -23,6 +23,7 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 from gymnasium import spaces
+from mink.exceptions import NoSolutionFound
 
 from generator.gl import open_renderer
 from sms3d_env.cameras import ImageObservation, RenderCamera
@@ -314,7 +315,7 @@ class SMS3DPickEnv(gym.Env):
         self.posture.follow(d.site_xmat[w.tool_site, 2::3])  # the tool's approach axis (its site's +z)
         try:
             d.ctrl[:6] = self.ik.step(a[:6] * self._twist_scale, d.qpos[w.arm_qadr])
-        except Exception:  # mink raises when the QP has no solution: hold the last command
+        except NoSolutionFound:  # e.g. pressed against a joint's limit: hold the last command
             pass
         badqacc = d.warning[_BADQACC]
         for _ in range(self.ctrl_cfg.substeps):

@@ -128,3 +128,26 @@ def test_one_compiled_model_serves_every_target_of_a_pool_bed():
     targets = {env.reset(seed=s, options={"target": k})[1]["target"] for s, k in enumerate(range(4))}
     assert targets == {0, 1, 2, 3}
     assert len(env.unwrapped.scene_source.models) == 1
+
+
+def test_a_step_whose_ik_has_no_solution_holds_the_last_command_and_other_errors_surface(monkeypatch):
+    from mink.exceptions import NoSolutionFound
+
+    env = gym.make("SMS3DPick-v1", scene=SMALL).unwrapped
+    env.reset(seed=0)
+    env.step(np.r_[0.5, 0.0, -0.5, 0.0, 0.0, 0.0, 0.0])
+    held = env.world.data.ctrl[:6].copy()
+
+    def no_solution(*args):
+        raise NoSolutionFound("daqp")
+
+    monkeypatch.setattr(env.ik, "step", no_solution)
+    obs, reward, terminated, truncated, info = env.step(np.r_[0.5, 0.0, -0.5, 0.0, 0.0, 0.0, 0.0])
+    assert np.array_equal(env.world.data.ctrl[:6], held) and np.isfinite(reward)
+
+    def broken(*args):
+        raise RuntimeError("a bug in the controller")
+
+    monkeypatch.setattr(env.ik, "step", broken)
+    with pytest.raises(RuntimeError, match="a bug in the controller"):
+        env.step(np.zeros(7))
