@@ -29,6 +29,8 @@ def test_the_exact_pose_scripted_picker_picks_with_every_link_colliding(robot):
 
 @pytest.mark.parametrize("env_id", ["SMS3DPick-v1", "SMS3DPickTrain-v1"])
 @pytest.mark.parametrize("robot", ROBOTS)
+# Unbounded observations (joint velocities, forces) are intended; Gymnasium-Robotics has the same.
+@pytest.mark.filterwarnings("ignore:.*observation space (minimum|maximum) value is -?infinity")
 def test_gymnasium_and_sb3_check_env_pass(env_id, robot):
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
