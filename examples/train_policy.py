@@ -5,7 +5,7 @@ Usage: python examples/train_policy.py [--recipe pick_policy|ppo] [--max-wall-s 
 
 The same as ``sms3d train-policy RECIPE --out DIR`` followed by ``sms3d eval-policy``. Time here
 (2 CPU cores, no GPU): ``pick_policy`` (behaviour cloning + DAgger) about 500 s; ``ppo`` (PPO from
-scratch) runs until ``--max-wall-s`` (the recipe's 7,000 s by default; its learning rate falls
+scratch) runs until ``--max-wall-s`` (the recipe's 2,400 s by default; its learning rate falls
 over whatever limit is given). Logs: <out>/progress.csv, checkpoints, <out>/model.zip; a rerun
 with the same settings resumes.
 """

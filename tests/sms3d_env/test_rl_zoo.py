@@ -123,7 +123,7 @@ def test_train_policy_reads_the_recipe_into_the_same_settings():
     assert recipe.kind == "rl" and cfg.env_id == ENV_ID and (cfg.normalize, cfg.normalize_reward, cfg.flat_observation) == (True, True, True)
     assert (cfg.pregrasp_start, cfg.pregrasp_anneal, cfg.num_mushrooms, cfg.scene_pool) == (0.75, True, 10, 500)
     assert cfg.learning_rate_final == pytest.approx(cfg.learning_rate / 10) and cfg.learning_rate_by_wall
-    assert cfg.max_wall_s == 7000 and cfg.target_kl == 0.02 and cfg.log_std_init == -1.0
+    assert cfg.max_wall_s == 2400 and cfg.target_kl == 0.02 and cfg.log_std_init == -1.0
 
 
 def test_a_recipe_with_the_env_arguments_of_earlier_versions_reads_the_same(tmp_path):
