@@ -128,12 +128,13 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
             counts = [t["n"] for t in table]
             lines.append(f"| {variant} | {label} | {oracle_text} | {tol_text} | {min(counts)}–{max(counts)} |")
     lines += ["", "Success rate per error (default physics, all reachable targets, 95 % Wilson interval):", "",
-              "| error | success | 95 % CI | n | failure causes |", "| --- | --- | --- | --- | --- |"]
+              "| error | success | 95 % CI | n | failure causes | failures that knocked the target off its root |",
+              "| --- | --- | --- | --- | --- | --- |"]
     for t in success_table(rows):
         if t["variant"] == "default":
             causes = ", ".join(f"{k} {v}" for k, v in sorted(t["causes"].items())) or "–"
             lines.append(f"| {t['error_deg']:g}° | {100 * t['success']:.1f} % | {100 * t['ci_low']:.1f}–{100 * t['ci_high']:.1f} % "
-                         f"| {t['n']} | {causes} |")
+                         f"| {t['n']} | {causes} | {t['knocked_off']} |")
     default_table = [t for t in success_table(rows) if t["variant"] == "default"]
     tol = tolerable_error(default_table) if default_table else None
     if tol is not None:

@@ -68,8 +68,9 @@ def mcnemar_p(a: Sequence[bool], b: Sequence[bool]) -> float:
 
 
 def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]], bool] = lambda r: True) -> list[dict[str, Any]]:
-    """Success rate with its interval and failure-cause counts per (variant, position error,
-    orientation error), for rows of one panel (robot, tool and bed size)."""
+    """Success rate with its interval, failure-cause counts and ``knocked_off`` (failed episodes
+    that left the target off its root: not left rooted for another try) per (variant, position
+    error, orientation error), for rows of one panel (robot, tool and bed size)."""
     groups: dict[tuple[str, float, float], list[dict[str, Any]]] = {}
     for r in rows:
         if r["reachable"] and r.get("source", "noisy") == "noisy" and keep(r):
@@ -82,8 +83,10 @@ def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]
         for r in group:
             if not r["success"]:
                 causes[r["failure_cause"] or "unknown"] = causes.get(r["failure_cause"] or "unknown", 0) + 1
+        knocked_off = sum(not r["success"] and r.get("target_detached") is True for r in group)
         table.append({"variant": variant, "position_error_mm": position, "error_deg": error, "n": len(group),
-                      "success": wins / len(group), "ci_low": lo, "ci_high": hi, "causes": causes})
+                      "success": wins / len(group), "ci_low": lo, "ci_high": hi, "causes": causes,
+                      "knocked_off": knocked_off})
     return table
 
 

@@ -15,7 +15,7 @@ from generator.dataset.errors import CorruptFileError
 from generator.errors import ConfigError
 from sms3d_env.cli import main
 from sms3d_env.study import report as study_report
-from sms3d_env.study.report import write_report
+from sms3d_env.study.report import summarise, write_report
 from sms3d_env.study.statistics import success_table, tolerable_error, wilson_interval
 from sms3d_env.study.sweep import SweepConfig, plan_tasks, run_sweep
 
@@ -415,3 +415,14 @@ def test_a_resumed_sweep_refuses_a_learned_picker_whose_config_changed(tmp_path,
                                                                              "end_on_dead_end": False}}))
     with pytest.raises(ValueError, match=f"picker files changed since the parts were made: {picker / 'config.json'}"):
         run_sweep(config, out, progress=False)
+
+
+def test_the_table_counts_failed_attempts_that_knocked_the_target_off():
+    rows = _rows({0.0: 18, 30.0: 10})
+    for k, r in enumerate(rows):
+        # every third episode ends with the target off its root: picked, or knocked off in a failure
+        r["target_detached"] = r["success"] or k % 3 == 0
+    table = {t["error_deg"]: t for t in success_table(rows)}
+    expected = {e: sum(not r["success"] and r["target_detached"] for r in rows if r["error_deg"] == e) for e in table}
+    assert {e: t["knocked_off"] for e, t in table.items()} == expected and expected[30.0] > 0
+    assert "| 30° | 50.0 % |" in summarise(rows) and f"| no_seal 10 | {expected[30.0]} |" in summarise(rows)
