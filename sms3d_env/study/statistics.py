@@ -83,7 +83,7 @@ def success_table(rows: Sequence[dict[str, Any]], keep: Callable[[dict[str, Any]
         for r in group:
             if not r["success"]:
                 causes[r["failure_cause"] or "unknown"] = causes.get(r["failure_cause"] or "unknown", 0) + 1
-        knocked_off = sum(not r["success"] and r.get("target_detached") is True for r in group)
+        knocked_off = sum(not r["success"] and r.get("target_detached", False) for r in group)
         table.append({"variant": variant, "position_error_mm": position, "error_deg": error, "n": len(group),
                       "success": wins / len(group), "ci_low": lo, "ci_high": hi, "causes": causes,
                       "knocked_off": knocked_off})

@@ -175,7 +175,7 @@ def plot_slices(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
                        ls=TOOL_LINE_STYLES[tools.index(tool) % len(TOOL_LINE_STYLES)],
                        marker=TOOL_MARKERS[tools.index(tool) % len(TOOL_MARKERS)])
         success_axes(ax)
-        ax.set_title(f"{robot}")
+        ax.set_title(robot)
         ax.legend(fontsize=8, loc="lower left")
     fig.suptitle("Success vs orientation error per tool and bed size (exact cap top, 95 % intervals)")
     fig.tight_layout()
