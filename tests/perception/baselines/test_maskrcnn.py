@@ -35,7 +35,7 @@ from sms3d_env.cli import main as cli_main
 try:
     import torchvision  # noqa: F401
 except (ImportError, RuntimeError) as exc:  # RuntimeError: built for another torch
-    pytest.skip(f"Mask R-CNN needs a working torchvision ({exc}): pip install -e '.[dev]'", allow_module_level=True)
+    pytest.skip(f"Mask R-CNN needs a working torchvision ({exc}): pip install -e '.[baselines]' with a matching torch", allow_module_level=True)
 
 SMALL = DetectorConfig(min_size=192, max_size=256)
 
