@@ -1,6 +1,6 @@
-"""Generate a small dataset, read it back, and draw one scene.
+"""Generate a small dataset, read it back, and draw one scene (its masks and cap boxes, titled).
 
-    python examples/generate_dataset.py --out /tmp/sms3d_ds --num-scenes 4
+    python examples/generate_dataset.py --out out/examples/dataset --num-scenes 4
 """
 
 from __future__ import annotations
@@ -10,18 +10,20 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless; or MUJOCO_GL=osmesa PYOPENGL_PLATFORM=osmesa
 
-from generator import SceneConfig  # noqa: E402
-from generator.dataset import DatasetOptions, RealismOptions, generate_dataset  # noqa: E402
-from generator.dataset.readers import InstancePointCloudDataset, SceneDataset  # noqa: E402
-from generator.dataset.show import render_overlay  # noqa: E402
-
 
 def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--out", default="/tmp/sms3d_ds")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="out/examples/dataset",
+                    help="dataset folder (default out/examples/dataset; the repository ignores out/)")
     ap.add_argument("--num-scenes", type=int, default=4)
-    ap.add_argument("--realism", action="store_true")
+    ap.add_argument("--realism", action="store_true", help="apply the camera model (depth noise, edge holes)")
     args = ap.parse_args()
+    # Imported after parsing, so that --help answers without loading torch and MuJoCo.
+    from generator import SceneConfig
+    from generator.dataset import DatasetOptions, RealismOptions, generate_dataset
+    from generator.dataset.readers import InstancePointCloudDataset, SceneDataset
+    from generator.dataset.show import render_overlay
+
     config = SceneConfig().replace(placement__num_mushrooms=30, placement__species="mixed")
     options = DatasetOptions(realism=RealismOptions(depth_noise=args.realism, edge_holes=args.realism))
     manifest = generate_dataset(args.out, config, args.num_scenes, seed=0, options=options, workers=1)

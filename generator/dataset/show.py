@@ -54,9 +54,20 @@ def overlay(root: str | Path, index: int, labels: str = "mushroom", alpha: float
     return img
 
 
+#: What the overlay's colours and lines mean, per ``labels`` (its title bar is its legend).
+OVERLAY_LEGENDS = {
+    "mushroom": "a colour per mushroom's visible mask, lines: its cap's 3-D box",
+    "cap": "a colour per visible cap mask, lines: the cap's 3-D box",
+    "amodal": "a colour per cap's whole (amodal) mask, yellow lines: its 3-D box",
+}
+
+
 def render_overlay(root: str | Path, index: int, out_png: str | Path, labels: str = "mushroom") -> Path:
-    """Write the overlay of scene ``index`` to ``out_png``."""
-    img = overlay(root, index, labels)
+    """Write the overlay of scene ``index`` to ``out_png``, under a title bar that names the
+    scene and says what the colours and lines show."""
+    from generator.image_text import with_title
+
+    img = with_title(overlay(root, index, labels), f"Scene {index}: {OVERLAY_LEGENDS[labels]}")
     out_png = Path(out_png)
     ok, buf = cv2.imencode(".png", cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
     try:

@@ -53,3 +53,15 @@ def test_the_demo_refuses_bad_flags_up_front(tmp_path, capsys, monkeypatch, flag
     err = capsys.readouterr().err
     assert err.startswith("sms3d demo: error: ") and named in err, err
     assert [p.name for p in tmp_path.iterdir()] == ["file"]
+
+
+def test_demo_help_describes_it_and_its_default_folder_is_ignored(capsys):
+    import subprocess
+    from pathlib import Path
+
+    with pytest.raises(SystemExit):
+        main(["demo", "--help"])
+    text = capsys.readouterr().out
+    assert "pictures of the bed" in text and "--out" in text
+    root = Path(__file__).resolve().parents[2]
+    assert subprocess.run(["git", "check-ignore", "-q", "sms3d_demo/scene.png"], cwd=root).returncode == 0

@@ -335,4 +335,7 @@ def test_show_writes_an_overlay(reference, tmp_path):
     assert cli_main(["show", str(reference), "--scene", "1", "--out", str(out)]) == 0
     img = cv2.imread(str(out))
     rgb = cv2.imread(str(reference / "scene_000001" / "rgb.png"))
-    assert img.shape == rgb.shape and (np.abs(img.astype(int) - rgb).sum(axis=2) > 30).mean() > 0.02
+    bar = img.shape[0] - rgb.shape[0]  # the title bar, which says what the colours and lines are
+    assert 10 < bar < 60 and img.shape[1:] == rgb.shape[1:]
+    assert (img[:bar] < 128).any(), "the title bar holds dark text"
+    assert (np.abs(img[bar:].astype(int) - rgb).sum(axis=2) > 30).mean() > 0.02
