@@ -54,6 +54,9 @@ V0_FREE_RADIUS = 0.10
 V0_SEAL = {"seal_response_time": 0.0, "seal_preload": False}
 #: ``SMS3DPick-v0``'s control step: 20 physics steps of 2 ms.
 V0_CONTROLLER = {"substeps": 20}
+#: The v0 ids' Jaco, mounted beside the bed, five of its links colliding with nothing: the env
+#: builds it only when given this very object (:func:`make_v0_env`).
+V0_ROBOT = RobotConfig()
 # State observation entries and their sizes, in the order of the flat vector they are cut from.
 _OBS_SIZES = {"joint_pos": 6, "joint_vel": 6, "tool_pose": 7, "suction": 3, "target_pose": 6,
               "target_rel": 3}
@@ -126,7 +129,7 @@ class SMS3DPickEnv(gym.Env):
     | Parameter | Type | Default | Description |
     | --- | --- | --- | --- |
     | ``render_mode`` | ``str`` or None | None | ``"rgb_array"``, ``"depth_array"`` (metric depth in metres) or ``"human"`` (MuJoCo's passive viewer, synced at every reset and step, closed by ``close()``; it needs a display, see :mod:`sms3d_env.viewer`, else ``DisplayUnavailableError``) |
-    | ``robot`` | ``str``, ``GantryConfig``, ``RobotConfig`` or None | None | ``"gantry"`` (``SMS3DPick-v1``'s: the Cartesian harvester of :mod:`sms3d_env.gantry`) or ``"jaco"`` (the Kinova Jaco hanging above the bed), or a robot config; every link of either collides with the soil and the mushrooms. None: ``SMS3DPick-v0``'s Jaco, mounted beside the bed with five links that collide with nothing |
+    | ``robot`` | ``str``, ``GantryConfig``, ``RobotConfig`` or None | ``"gantry"`` | ``"gantry"`` (the Cartesian harvester of :mod:`sms3d_env.gantry`) or ``"jaco"`` (the Kinova Jaco hanging above the bed), or a robot config; every link of either collides with the soil and the mushrooms. None: the default, ``"gantry"`` |
     | ``tool`` | ``str`` or None | None | ``"suction"`` or ``"hand"``; overrides the robot's tool (default: ``"suction"``) |
     | ``scene`` | ``SceneSourceConfig``, ``generator.SceneConfig``, a list of ``generator.Scene``, a dataset folder, or None | None | where each reset's bed comes from and which mushrooms can move (:class:`~sms3d_env.scene_source.SceneSourceConfig`: generated beds, a fixed list, a pool, ``free_radius``). A ``SceneConfig`` (or its mapping form, e.g. ``{"placement": {"num_mushrooms": 10}}``): a new bed of it per reset; scenes or a ``sms3d generate`` folder (checksums verified): one drawn per reset (``options={"scene": k}``); None: a new 25-mushroom bed per reset, every mushroom free |
     | ``target`` | ``str`` or ``TargetRule`` | ``"tallest"`` | which mushroom is picked (:class:`~sms3d_env.targets.TargetRule`: ``"tallest"``, ``"largest"``, ``"random"``, ``"index"`` with its ``index``, ``max_tilt_deg``); ``options={"target": i}`` picks mushroom ``i`` for one reset |
@@ -174,7 +177,7 @@ class SMS3DPickEnv(gym.Env):
     def __init__(
         self,
         render_mode: str | None = None,
-        robot: str | RobotSpec | None = None,
+        robot: str | RobotSpec | None = "gantry",
         tool: str | None = None,
         scene: Any = None,
         target: str | TargetRule | Mapping[str, Any] = "tallest",
@@ -190,8 +193,9 @@ class SMS3DPickEnv(gym.Env):
         image_obs: bool | ImageObservation | Mapping[str, Any] = False,
         render_camera: str | RenderCamera | Mapping[str, Any] | None = None,
     ) -> None:
-        # None: v0's Jaco (five of its links collide with nothing); SMS3DPick-v1 passes a name.
-        self.robot_cfg = RobotConfig() if robot is None else make_robot(robot)
+        # None is the default robot, never v0's Jaco (five links that collide with nothing): only the
+        # v0 ids' entry point passes that one (V0_ROBOT), and make_robot refuses it otherwise.
+        self.robot_cfg = V0_ROBOT if robot is V0_ROBOT else make_robot("gantry" if robot is None else robot)
         check_env_args(render_mode=render_mode, tool=tool or self.robot_cfg.tool, suction_mode=suction_mode,
                        pose_source=pose_source, pose_error_deg=pose_error_deg, end_on_dead_end=end_on_dead_end,
                        task_obs=task_obs)
@@ -308,9 +312,11 @@ class SMS3DPickEnv(gym.Env):
         a = a.clip(-1.0, 1.0)
         w, picking = self.world, self.picking
         m, d, ep = w.model, w.data, picking.state
-        if self.done:
+        if self.done:  # nothing moves: the last transition's outcome stands, with no more reward
             warnings.warn("step() called after the episode ended (terminated or truncated); call "
                           "reset(). The episode stays ended.", stacklevel=2)
+            obs, _, terminated, truncated, info = self._last_transition
+            return obs, 0.0, terminated, truncated, dict(info)
         picking.begin_step(float(a[6]))  # the tool's command (suction: the valve; hand: fingers)
         self.posture.follow(d.site_xmat[w.tool_site, 2::3])  # the tool's approach axis (its site's +z)
         try:
@@ -342,7 +348,10 @@ class SMS3DPickEnv(gym.Env):
             mujoco.mj_forward(m, d)
         if self.render_mode == "human":
             self.render()
-        return self._obs(), reward, terminated, truncated, info
+        obs = self._obs()
+        if self.done:
+            self._last_transition = (obs, reward, terminated, truncated, dict(info))
+        return obs, reward, terminated, truncated, info
 
     def _model_key(self, slot: int | None, target: int) -> tuple[int, int | None] | None:
         """The compiled-model cache key of a pool bed: its slot and, where only the mushrooms near
@@ -465,8 +474,8 @@ class SMS3DPickEnv(gym.Env):
 
 
 def make_v0_env(scene: Any = None, **kwargs: Any) -> SMS3DPickEnv:
-    """The env of the ``-v0`` ids (their entry point): ``SMS3DPickEnv(**kwargs)`` (v0's Jaco
-    unless ``robot`` says otherwise) with only the mushrooms within ``V0_FREE_RADIUS`` of the
+    """The env of the ``-v0`` ids (their entry point): ``SMS3DPickEnv(**kwargs)`` (v0's Jaco,
+    ``V0_ROBOT``, unless ``robot`` says otherwise) with only the mushrooms within ``V0_FREE_RADIUS`` of the
     target free, whatever bed ``scene`` gives (a ``SceneSourceConfig`` with a ``free_radius`` of
     its own keeps it; a ``scene`` passed to ``gym.make`` replaces the registered one whole, so the
     v0 radius cannot be a registered argument), and, unless ``physics`` or ``controller`` is
@@ -476,7 +485,7 @@ def make_v0_env(scene: Any = None, **kwargs: Any) -> SMS3DPickEnv:
         source = replace(source, free_radius=V0_FREE_RADIUS)
     if kwargs.get("controller") is None:
         kwargs["controller"] = ControllerConfig(**V0_CONTROLLER)
-    env = SMS3DPickEnv(scene=source, **kwargs)
+    env = SMS3DPickEnv(scene=source, **{"robot": V0_ROBOT, **kwargs})
     if kwargs.get("physics") is None:  # the env's defaults for its robot, with v0's seal rule
         env.params = replace(env.params, **V0_SEAL)
     return env

@@ -153,3 +153,22 @@ def test_a_step_whose_ik_has_no_solution_holds_the_last_command_and_other_errors
     monkeypatch.setattr(env.ik, "step", broken)
     with pytest.raises(RuntimeError, match="a bug in the controller"):
         env.step(np.zeros(7))
+
+
+def test_robot_none_and_the_class_default_are_the_gantry_never_v0s_jaco():
+    from sms3d_env.gantry import GantryConfig
+    from sms3d_env.pick_env import SMS3DPickEnv
+
+    assert isinstance(gym.make("SMS3DPick-v1", robot=None, scene=SMALL).unwrapped.robot_cfg, GantryConfig)
+    assert isinstance(SMS3DPickEnv(scene=SMALL).robot_cfg, GantryConfig)
+
+
+def test_a_step_after_the_episode_ended_keeps_its_outcome():
+    env = gym.make("SMS3DPick-v1", scene=SMALL, max_episode_steps=None)
+    result = run_episode(env, ScriptedPicker.for_env(env), 1_000_000)
+    assert result["success"]
+    base = env.unwrapped
+    with pytest.warns(UserWarning, match="after the episode ended"):
+        _, reward, terminated, truncated, info = base.step(np.zeros(7))
+    assert (reward, terminated, truncated) == (0.0, True, False)
+    assert info["is_success"] and info["failure_cause"] == result["failure_cause"]
