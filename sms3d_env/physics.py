@@ -39,15 +39,16 @@ def root_utilisation(tension: float, bend: float, twist: float, p: PickPhysicsPa
 
 
 def grip_utilisation(tension: float, shear: float, bend: float, twist: float,
-                     p: PickPhysicsParams, compression: float = 0.0) -> float:
+                     p: PickPhysicsParams, compression: float = 0.0, vacuum_fraction: float = 1.0) -> float:
     """Load on the seal as a fraction of its capacity (>= 1 releases), elliptic interaction.
 
     Capacities: tension = holding force; shear = friction x normal force; bending moment =
     normal force x a / 2 (one rim edge lifts); twist = friction x normal force x 2a/3. The normal
     force pressing the lip on the cap is the holding force plus, with ``p.seal_preload``, the
-    cup's ``compression`` of the cap (N), as in Dex-Net 3.0's suction contact model.
+    cup's ``compression`` of the cap (N), as in Dex-Net 3.0's suction contact model. The holding
+    force is ``vacuum_fraction`` of the full vacuum's (the vacuum still rising after the seal).
     """
-    fh, a, mu = p.holding_force, p.cup_radius, p.shear_friction
+    fh, a, mu = p.holding_force * max(vacuum_fraction, 1e-9), p.cup_radius, p.shear_friction
     normal = fh + compression if p.seal_preload else fh
     return math.sqrt((tension / fh) ** 2 + (shear / (mu * normal)) ** 2 + (bend / (normal * a / 2)) ** 2
                      + (twist / (mu * normal * 2 * a / 3)) ** 2)

@@ -56,6 +56,23 @@ class PickPhysicsParams:
             Dex-Net 3.0's suction contact model, Mahler et al. 2018, bounds friction and torsion
             by the normal force, vacuum included). False: the capacities of the holding force
             alone (v0).
+        lip_seal: judge the seal on the cup's whole lip (Dex-Net 3.0's perimeter model): it
+            forms only when every one of ``lip_points`` points of the lip (radius
+            ``cup_radius``) lies over the target's cap, the spread of their distances to it
+            along the cup axis within ``lip_compliance``; a lip point over air, soil, a
+            neighbour or past the cap's edge leaks. It replaces the one-contact rule
+            (``seal_angle_deg``, ``seal_region``). False: the one-contact rule (v0, v1).
+        lip_compliance: the rim-height mismatch the cup's lip or bellows absorbs (m), the stroke
+            ``S`` of a bellows cup. ASSUMPTION: bellows suction cups "compensate for variations
+            in height" (Piab, SMC ZPT catalogue) but no stored datasheet gives the stroke of a
+            20 mm bellows; 5 mm is the order of a 1.5-fold bellows of that size. A rigid lip
+            tilted by theta on a plane spreads by about 2a tan(theta), so the lip rule tolerates
+            about atan(S / 2a).
+        lip_points: points on the lip the seal test checks (evenly spaced).
+        evacuation_time: time constant (s) of the vacuum's rise once the lip seals: the holding
+            force is ``holding_force (1 - exp(-t / evacuation_time))`` t seconds after sealing
+            (with ``lip_seal``). ASSUMPTION: no source for a small cup's evacuation time (hose
+            and ejector dependent); 50 ms, a short hose on a venturi ejector.
     """
 
     pull_force: float = 8.0
@@ -73,6 +90,10 @@ class PickPhysicsParams:
     settle_time: float = 0.1
     seal_response_time: float = 0.02
     seal_preload: bool = True
+    lip_seal: bool = False
+    lip_compliance: float = 0.005
+    lip_points: int = 16
+    evacuation_time: float = 0.05
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -80,6 +101,8 @@ class PickPhysicsParams:
                 raise ValueError(f"PickPhysicsParams.{name} must be a finite number >= 0, got {value!r}")
         if not 0 < self.seal_angle_deg < 90:
             raise ValueError("PickPhysicsParams.seal_angle_deg must be in (0, 90)")
+        if self.lip_points < 3 or self.lip_points != int(self.lip_points):
+            raise ValueError(f"PickPhysicsParams.lip_points must be an integer >= 3, got {self.lip_points!r}")
 
     @property
     def holding_force(self) -> float:

@@ -4,6 +4,8 @@
 | --- | --- | --- |
 | valve: on while the command is > 0; latched (training option): held once sealed | ``Suction.command`` | |
 | seal: cup on a cap top, within the seal angle, pressed with the seal force, suction on | ``on_contact`` / ``seals`` | ``PickPhysicsParams.seal_angle_deg``, ``seal_region``, ``seal_force`` |
+| seal on the whole lip (``lip_seal``): every lip point over the target's cap within the lip's compliance | ``lip_gaps`` | ``PickPhysicsParams.lip_compliance``, ``lip_points`` |
+| vacuum rise (``lip_seal``): the holding force grows over the evacuation time | ``check_hold`` | ``PickPhysicsParams.evacuation_time`` |
 | grip: the seal is a weld anchored at the contact; released when the valve closes | ``grip`` / ``release`` | |
 | grip loss: the seal's load (low-passed) against its capacity | ``check_hold`` / ``grip_wrench`` | ``physics.grip_utilisation`` (vacuum x cup area, friction), ``PickPhysicsParams.seal_response_time`` |
 | dead ends: the target knocked off its roots and not held, or a latched seal on a neighbour | ``dead_end`` | |
@@ -25,6 +27,9 @@ if TYPE_CHECKING:
     from sms3d_env.world import World
 
 _EQ = int(mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+#: The lip test's rays start this far behind the cup face (m), beyond how deep the soft cup-cap
+#: contact lets the face sink into the cap, so that no ray starts inside the cap.
+LIP_RAY_SETBACK = 0.005
 
 
 class Suction:
@@ -49,6 +54,10 @@ class Suction:
         # whose weight per physics step is fixed by the world's step.
         tau = params.seal_response_time
         self._load_blend = 1.0 - math.exp(-world.model.opt.timestep / tau) if tau > 0 else 1.0
+        angles = np.linspace(0.0, 2 * np.pi, int(params.lip_points), endpoint=False)
+        self._lip_offsets = params.cup_radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        self._ray_geom = np.zeros(1, np.int32)
+        self._seal_time = 0.0
 
     def reset(self) -> None:
         pass
@@ -74,9 +83,14 @@ class Suction:
                 self.grip(mushroom, d.contact.pos[contact].copy())
 
     def seals(self, k: int, point: np.ndarray, normal_cup_to_cap: np.ndarray) -> bool:
-        """Seal test: cup axis vs. cap normal at the contact, and contact on the cap top."""
+        """Seal test. With ``lip_seal``: every lip point over cap ``k``, their gaps to it spread
+        by at most the lip's compliance (:meth:`lip_gaps`). Otherwise the one-contact rule: cup
+        axis vs. cap normal at the contact, and the contact on the cap top."""
         w, p = self.world, self.params
         d = w.data
+        if p.lip_seal:
+            gaps = self.lip_gaps(k)
+            return bool(np.isfinite(gaps).all() and gaps.max() - gaps.min() <= p.lip_compliance)
         z = d.site_xmat[w.tool_site].reshape(3, 3)[:, 2]
         cos = float(z @ normal_cup_to_cap)
         if cos < np.cos(np.deg2rad(p.seal_angle_deg)):
@@ -86,6 +100,25 @@ class Suction:
         rel = point - d.xpos[b]
         radial = np.linalg.norm(rel - (rel @ axis) * axis)
         return bool(radial <= p.seal_region * w.cap_radius[k])
+
+    def lip_gaps(self, k: int) -> np.ndarray:
+        """The distance (m) along the cup axis from each lip point (``lip_points`` on a circle of
+        ``cup_radius`` in the cup face) to mushroom ``k``'s cap; ``inf`` where the point's ray
+        meets air, soil, another mushroom or the cap's stem first, or meets it further than the
+        lip could reach (its compliance plus the setback)."""
+        w = self.world
+        m, d = w.model, w.data
+        frame = d.site_xmat[w.tool_site].reshape(3, 3)
+        axis = frame[:, 2].copy()  # out of the cup, towards the cap
+        reach = LIP_RAY_SETBACK + self.params.lip_compliance
+        gaps = np.full(len(self._lip_offsets), np.inf)
+        for i, (u, v) in enumerate(self._lip_offsets):
+            origin = d.site_xpos[w.tool_site] + u * frame[:, 0] + v * frame[:, 1] - LIP_RAY_SETBACK * axis
+            dist = mujoco.mj_ray(m, d, origin, axis, None, 1, w.cup_body, self._ray_geom)
+            g = int(self._ray_geom[0])
+            if 0 <= dist <= reach and g >= 0 and w.is_cap[g] and w.geom_mushroom[g] == k:
+                gaps[i] = dist - LIP_RAY_SETBACK
+        return gaps
 
     def grip(self, k: int, point: np.ndarray | None = None) -> None:
         """Seal the cup on mushroom ``k``: a weld anchored at the contact ``point`` (world;
@@ -109,6 +142,7 @@ class Suction:
         m.geom_contype[w.cup_geom] = ph.SOIL_CONAFFINITY
         ep.grip = k
         ep.seal_step, ep.seal_tool_x = ep.steps, d.site_xmat[w.tool_site, 0::3].copy()
+        self._seal_time = float(d.time)
         if k == ep.target:
             ep.ever_gripped_target = True
 
@@ -145,7 +179,12 @@ class Suction:
         force, torque_c, z = self.grip_wrench()
         fz, shear = ph.axial_split(force, z)
         tz, bend = ph.axial_split(torque_c, z)
-        load = ph.grip_utilisation(max(0.0, -fz), shear, bend, abs(tz), self.params, compression=max(0.0, fz))
+        p = self.params
+        # The vacuum rises over the evacuation time once the lip seals.
+        rise = (1.0 - math.exp(-(self.world.data.time - self._seal_time) / p.evacuation_time)
+                if p.lip_seal and p.evacuation_time > 0 else 1.0)
+        load = ph.grip_utilisation(max(0.0, -fz), shear, bend, abs(tz), p, compression=max(0.0, fz),
+                                   vacuum_fraction=rise)
         ep.grip_util += self._load_blend * (load - ep.grip_util)
         if ep.grip_util >= 1.0:
             if k == ep.target and ep.target_detached:

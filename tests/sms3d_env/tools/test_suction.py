@@ -166,3 +166,79 @@ def test_the_seal_outlasts_a_one_step_impulse_but_not_a_sustained_overload():
     assert not env.picking.state.grip_lost
     assert not _overload_then_rest(env, b, pull, steps=round(0.05 / env.model.opt.timestep))
     assert env.picking.state.grip_lost
+
+
+def _place_cup(world, k: int, tilt_deg: float, across: float = 0.0) -> None:
+    """Put the cup face 0.5 mm above mushroom ``k``'s cap top (moved ``across`` metres over the
+    cap), its axis along the stem into the cap turned by ``tilt_deg``: written straight into the
+    site's pose, which is all ``lip_gaps`` reads of the robot."""
+    d = world.data
+    b = world.body_ids[k]
+    stem = d.xmat[b].reshape(3, 3)[:, 2]
+    z = -_tilted(stem, tilt_deg)
+    x = np.cross(z, [0.0, 1.0, 0.0] if abs(z[1]) < 0.9 else [1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    frame = np.stack([x, np.cross(z, x), z], axis=1)
+    top = d.site_xpos[world.cap_top_sites[k]] + across * _tilted(stem, 90.0)
+    d.site_xpos[world.tool_site] = top - 0.0005 * z
+    d.site_xmat[world.tool_site] = frame.ravel()
+
+
+@pytest.fixture()
+def lip_cup(cup):
+    suction, world, params, target = cup
+    d = world.data
+    saved = d.site_xpos[world.tool_site].copy(), d.site_xmat[world.tool_site].copy()
+    lip = Suction(world, PickPhysicsParams(lip_seal=True), EpisodeState(target=target))
+    yield lip, world, target
+    d.site_xpos[world.tool_site], d.site_xmat[world.tool_site] = saved
+
+
+def test_a_square_cup_on_the_cap_top_meets_the_cap_with_its_whole_lip(lip_cup):
+    lip, world, target = lip_cup
+    _place_cup(world, target, 0.0)
+    gaps = lip.lip_gaps(target)
+    assert np.isfinite(gaps).all() and gaps.max() - gaps.min() < 1e-3
+    assert lip.seals(target, np.zeros(3), np.zeros(3))
+
+
+@pytest.mark.parametrize("tilt_deg", [20.0, 30.0])
+def test_a_cup_tilted_past_its_compliance_does_not_seal(lip_cup, tilt_deg):
+    """A rigid lip tilted by theta spreads by about 2a tan(theta) (7.3 mm at 20 degrees for a
+    20 mm cup), more than the 5 mm a bellows absorbs: the far rim stands off the cap and leaks."""
+    lip, world, target = lip_cup
+    _place_cup(world, target, tilt_deg)
+    gaps = lip.lip_gaps(target)
+    assert not np.isfinite(gaps).all() or gaps.max() - gaps.min() > lip.params.lip_compliance
+    assert not lip.seals(target, np.zeros(3), np.zeros(3))
+
+
+def test_the_scripted_picker_20_degrees_off_seals_with_one_contact_but_not_with_the_whole_lip():
+    """The same episodes: the one-contact rule seals where the tilted rim first touches the dome;
+    the lip rule finds the far rim more than the lip's compliance off the cap."""
+    from sms3d_env.pickers.episode import run_episode
+    from sms3d_env.pickers.scripted import ScriptedPicker
+
+    outcomes = {}
+    for lip in (False, True):
+        env = gym.make("SMS3DPick-v1", scene=generator.SceneConfig().replace(placement__num_mushrooms=10),
+                       pose_source="noisy", pose_error_deg=20.0, physics=PickPhysicsParams(lip_seal=lip))
+        picker = ScriptedPicker.for_env(env)
+        outcomes[lip] = [run_episode(env, picker, seed)["failure_cause"] for seed in (1_000_000, 1_000_001)]
+        env.close()
+    assert outcomes == {False: [None, None], True: ["no_seal", "no_seal"]}
+
+
+def test_a_lip_partly_past_the_caps_edge_leaks(lip_cup):
+    lip, world, target = lip_cup
+    _place_cup(world, target, 0.0, across=world.cap_radius[target])
+    assert not np.isfinite(lip.lip_gaps(target)).all()
+    assert not lip.seals(target, np.zeros(3), np.zeros(3))
+
+
+def test_the_holding_force_rises_over_the_evacuation_time():
+    from sms3d_env.physics import grip_utilisation
+
+    p = PickPhysicsParams(lip_seal=True)
+    full = grip_utilisation(2.0, 0.0, 0.0, 0.0, p)
+    assert grip_utilisation(2.0, 0.0, 0.0, 0.0, p, vacuum_fraction=0.5) == pytest.approx(2 * full)
