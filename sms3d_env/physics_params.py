@@ -73,6 +73,10 @@ class PickPhysicsParams:
             force is ``holding_force (1 - exp(-t / evacuation_time))`` t seconds after sealing
             (with ``lip_seal``). ASSUMPTION: no source for a small cup's evacuation time (hose
             and ejector dependent); 50 ms, a short hose on a venturi ejector.
+        clean_pick: success needs a clean pick, as a grower judges it: besides the target picked
+            unbruised, no neighbour moved further than ``disturb_tolerance`` or knocked off its
+            roots (``info["neighbours_disturbed"]``; ``info["target_picked"]`` says whether the
+            target itself was picked). False: neighbours do not count (v0, v1).
     """
 
     pull_force: float = 8.0
@@ -94,6 +98,7 @@ class PickPhysicsParams:
     lip_compliance: float = 0.005
     lip_points: int = 16
     evacuation_time: float = 0.05
+    clean_pick: bool = False
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():

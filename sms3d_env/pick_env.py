@@ -107,8 +107,8 @@ class SMS3DPickEnv(gym.Env):
     ## Episode end
     | | when |
     | --- | --- |
-    | terminated, success | target detached, held, lifted ``PickPhysicsParams.lift_height`` |
-    | terminated, failure | a cap bruised; the detached target's grip lost; with ``end_on_dead_end``: the target knocked off and not held, or a latched seal on a neighbour |
+    | terminated, success | target picked (detached, held, lifted ``PickPhysicsParams.lift_height``), no cap bruised; with ``PickPhysicsParams.clean_pick`` no neighbour disturbed |
+    | terminated, failure | the target picked with a neighbour disturbed (``clean_pick``); a cap bruised; the detached target's grip lost; with ``end_on_dead_end``: the target knocked off and not held, or a latched seal on a neighbour |
     | truncated | the simulation went unstable; the registered time limit (250 steps) |
 
     ``info``: ``is_success``, ``failure_cause`` (one of ``FAILURE_CAUSES``), ``target``,
@@ -334,7 +334,7 @@ class SMS3DPickEnv(gym.Env):
             ep.unstable = True
         picking.after_step()
         info = picking.evaluate()
-        terminated = (info["is_success"] or bool(ep.bruised) or (ep.target_detached and ep.grip_lost)
+        terminated = (info["target_picked"] or bool(ep.bruised) or (ep.target_detached and ep.grip_lost)
                       or (self.end_on_dead_end and picking.dead_end())
                       or self.done)
         truncated = ep.unstable

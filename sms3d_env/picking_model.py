@@ -8,7 +8,7 @@ every physics substep (dm_control's ``after_substep``), apart from the gym API.
 | bruising: cap contact force above the threshold | ``_contacts`` | ``bruise_force`` |
 | neighbours disturbed: moved further than the tolerance, or detached | ``after_step`` | ``disturb_tolerance`` |
 | soil contacts of detached mushrooms once their stem is out of the soil | ``after_step`` | ``physics.SOIL_CLEARANCE`` |
-| success: target detached, held, lifted, unbruised | ``success`` | ``lift_height`` |
+| success: target detached, held, lifted, unbruised (with ``clean_pick``: no neighbour disturbed) | ``picked``, ``success`` | ``lift_height``, ``clean_pick`` |
 
 Usage (what ``SMS3DPickEnv.step`` does)::
 
@@ -208,10 +208,17 @@ class PickingModel:
         w = self.world
         return float(w.data.site_xpos[w.cap_top_sites[self.state.target], 2] - self.init_cap_top[2])
 
-    def success(self) -> bool:
+    def picked(self) -> bool:
+        """The target is off its roots, held and lifted: the pick is over, clean or not."""
         ep = self.state
-        return bool(ep.target_detached and ep.grip == ep.target and not ep.bruised
-                    and not ep.unstable and self.lift() >= self.params.lift_height)
+        return bool(ep.target_detached and ep.grip == ep.target and not ep.unstable
+                    and self.lift() >= self.params.lift_height)
+
+    def success(self) -> bool:
+        """Picked with no cap bruised; with ``clean_pick`` also no neighbour moved further than
+        ``disturb_tolerance`` or knocked off its roots (a grower's clean pick)."""
+        ep = self.state
+        return self.picked() and not ep.bruised and not (self.params.clean_pick and ep.disturbed)
 
     def dead_end(self) -> bool:
         """The episode can no longer succeed (``Tool.dead_end``: suction, the target off its
@@ -248,6 +255,7 @@ class PickingModel:
         return {
             "is_success": success,
             "failure_cause": None if success else self.failure_cause(),
+            "target_picked": self.picked(),
             "target": ep.target,
             "reachable": ep.reachable,
             "gripped": ep.grip >= 0,

@@ -141,3 +141,36 @@ def test_success_is_the_target_detached_held_lifted_and_unbruised(make_world, up
     _move(world, upright, np.array([0.0, 0.0, 0.02 * params.lift_height]))
     assert model.success() is not bruised
     assert model.failure_cause() == ("bruised" if bruised else None)
+
+
+@pytest.mark.parametrize("clean_pick", [False, True])
+def test_a_pick_that_moves_a_neighbour_is_no_success_when_picks_must_be_clean(make_world, upright, clean_pick):
+    world = make_world(GantryConfig())
+    params = PickPhysicsParams(clean_pick=clean_pick)
+    model = PickingModel(world, params, upright, True)
+    model.settled()
+    ep = model.state
+    ep.ever_gripped_target, ep.target_detached, ep.grip = True, True, upright
+    ep.disturbed = {next(k for k in range(len(world.body_ids)) if k != upright)}
+    _move(world, upright, np.array([0.0, 0.0, 1.01 * params.lift_height]))
+    info = model.evaluate()
+    assert info["target_picked"] and info["neighbours_disturbed"] == 1
+    assert info["is_success"] is not clean_pick
+    assert info["failure_cause"] == ("neighbour_disturbed" if clean_pick else None)
+
+
+def test_a_clean_pick_episode_ends_when_the_target_is_picked_and_reports_the_neighbour():
+    """Seed 5 of a 25-mushroom bed with a random target: the scripted picker lifts the target and
+    moves one neighbour more than 5 mm (found by a search of seeds 0-5)."""
+    from sms3d_env.pickers.episode import run_episode
+    from sms3d_env.pickers.scripted import ScriptedPicker
+
+    bed = generator.SceneConfig().replace(placement__num_mushrooms=25)
+    results = {}
+    for clean in (False, True):
+        env = gym.make("SMS3DPick-v1", scene=bed, target="random", physics=PickPhysicsParams(clean_pick=clean))
+        results[clean] = run_episode(env, ScriptedPicker.for_env(env), 5)
+        env.close()
+    assert results[False]["success"] and results[False]["neighbours_disturbed"] == 1
+    assert not results[True]["success"] and results[True]["failure_cause"] == "neighbour_disturbed"
+    assert results[True]["steps"] == results[False]["steps"]  # the same pick, judged as a grower would
