@@ -132,7 +132,7 @@ class SMS3DPickEnv(gym.Env):
     | ``robot`` | ``str``, ``GantryConfig``, ``RobotConfig`` or None | ``"gantry"`` | ``"gantry"`` (the Cartesian harvester of :mod:`sms3d_env.gantry`) or ``"jaco"`` (the Kinova Jaco hanging above the bed), or a robot config; every link of either collides with the soil and the mushrooms. None: the default, ``"gantry"`` |
     | ``tool`` | ``str`` or None | None | ``"suction"`` or ``"hand"``; overrides the robot's tool (default: ``"suction"``) |
     | ``scene`` | ``SceneSourceConfig``, ``generator.SceneConfig``, a list of ``generator.Scene``, a dataset folder, or None | None | where each reset's bed comes from and which mushrooms can move (:class:`~sms3d_env.scene_source.SceneSourceConfig`: generated beds, a fixed list, a pool, ``free_radius``). A ``SceneConfig`` (or its mapping form, e.g. ``{"placement": {"num_mushrooms": 10}}``): a new bed of it per reset; scenes or a ``sms3d generate`` folder (checksums verified): one drawn per reset (``options={"scene": k}``); None: a new 25-mushroom bed per reset, every mushroom free |
-    | ``target`` | ``str`` or ``TargetRule`` | ``"tallest"`` | which mushroom is picked (:class:`~sms3d_env.targets.TargetRule`: ``"tallest"``, ``"largest"``, ``"random"``, ``"index"`` with its ``index``, ``max_tilt_deg``); ``options={"target": i}`` picks mushroom ``i`` for one reset |
+    | ``target`` | ``str`` or ``TargetRule`` | ``"tallest"`` | which mushroom is picked (:class:`~sms3d_env.targets.TargetRule`: ``"tallest"``, ``"largest"``, ``"random"``, ``"index"`` with its ``index``, ``max_tilt_deg``; drawn uniformly within a class: ``"harvest_ready"`` (a cap of at least ``harvest_diameter``, 50 mm), ``"isolated"``, ``"crowded"``, ``"approach_blocked"``, ``"small"``); ``options={"target": i}`` picks mushroom ``i`` for one reset |
     | ``pose_source`` | ``str`` or ``PoseSource`` | ``"oracle"`` | the target estimate in the observation: ``"oracle"``, ``"noisy"``, ``"perception"`` or a callable ``(scene, id, rng) -> PoseEstimate`` (e.g. ``NoisyPose(error_deg, position_std=0.002)``, ``PerceptionPose(detector=...)``) |
     | ``pose_error_deg`` | ``float`` or ``(low, high)`` | 0.0 | the ``"noisy"`` source's rotation error (deg), or a pair: drawn per episode uniformly in it (``UniformNoisyPose``); refused with any other source |
     | ``reward_type`` | ``str`` or ``RewardConfig`` | ``"dense"`` | ``"dense"``, ``"sparse"`` or ``"staged"``, or :class:`~sms3d_env.rewards.RewardConfig` (``kind``, the staged reward's ``horizon``) |
@@ -276,7 +276,7 @@ class SMS3DPickEnv(gym.Env):
         rule = self.target_rule
         kind, index = ("index", int(options["target"])) if "target" in options else (rule.rule, rule.index)
         target, reachable = select_target(scene, kind, self.np_random, self.reach, index=index,
-                                          max_tilt_deg=rule.max_tilt_deg)
+                                          max_tilt_deg=rule.max_tilt_deg, harvest_diameter=rule.harvest_diameter)
         estimate = self.pose_source(scene, target, self.np_random)
         self.target_pose = np.concatenate([estimate.cap_top, estimate.stem_axis])
         self._disown_renderers()

@@ -2,7 +2,10 @@
 
 Rules (``TargetRule``, the env's ``target`` argument): ``"tallest"`` (highest cap top among
 reachable mushrooms, the default: the cup meets it before any neighbour), ``"largest"`` (cap
-diameter), ``"index"`` (``TargetRule.index``), ``"random"``.
+diameter), ``"index"`` (``TargetRule.index``), ``"random"``; drawn uniformly within a class of
+the study (:data:`CLASS_RULES`): ``"harvest_ready"`` (a cap at or above the harvest size, what a
+farm picks now), ``"isolated"``, ``"crowded"``, ``"approach_blocked"`` (harvest-ready ones by
+their neighbours) and ``"small"`` (below the harvest size).
 Reachability: inverse kinematics (bounded least squares on the arm-only model) reaches a
 pre-grasp pose above the cap top along the stem axis and the grasp pose itself.
 """
@@ -18,7 +21,20 @@ from scipy.optimize import least_squares
 
 from sms3d_env.records import check_choice, check_int, check_number
 
-RULES = ("tallest", "largest", "index", "random")
+#: Rules that draw the target uniformly among the mushrooms of one class (``target_classes``).
+CLASS_RULES = ("harvest_ready", "isolated", "crowded", "approach_blocked", "small")
+RULES = ("tallest", "largest", "index", "random", *CLASS_RULES)
+#: Farms harvest Agaricus at caps of about 50-60 mm (docs/physics.md, harvest size): the
+#: smallest cap picked now (m).
+HARVEST_DIAMETER = 0.050
+#: A harvest-ready cap is isolated when every neighbouring cap's edge is at least this far from
+#: its edge (m, horizontally), crowded when one is closer than ``CROWDED_GAP``. ASSUMPTION: a
+#: cup's radius of free space (10 mm) around the cap, and caps that touch.
+ISOLATED_GAP, CROWDED_GAP = 0.010, 0.002
+#: The approach is blocked when a neighbour's cap reaches into the cylinder the cup sweeps on its
+#: way down the stem axis: this radius (m; the 10 mm cup and its 5 mm tube-and-bellows margin,
+#: ASSUMPTION) over ``APPROACH_HEIGHT`` above the cap top (the pre-grasp stand-off).
+APPROACH_RADIUS, APPROACH_HEIGHT = 0.015, 0.05
 
 
 @dataclass(frozen=True)
@@ -34,11 +50,13 @@ class TargetRule:
             refused with another rule, which would ignore it.
         max_tilt_deg: mushrooms whose stem axis is tilted more than this from vertical (deg)
             are not chosen by the other rules.
+        harvest_diameter: the smallest cap a farm picks now (m): the class rules' harvest size.
     """
 
     rule: str = "tallest"
     index: int = 0
     max_tilt_deg: float = 45.0
+    harvest_diameter: float = HARVEST_DIAMETER
 
     def __post_init__(self) -> None:
         check_choice("TargetRule.rule", self.rule, RULES)
@@ -47,6 +65,7 @@ class TargetRule:
             raise ValueError(f"TargetRule.index picks a mushroom for rule='index'; with rule={self.rule!r} it "
                              f"would be ignored (got index={self.index!r})")
         check_number("TargetRule.max_tilt_deg", self.max_tilt_deg, 0.0, 90.0, "a finite number in [0, 90] (deg)")
+        check_number("TargetRule.harvest_diameter", self.harvest_diameter, 0.0, 0.2, "a cap diameter in [0, 0.2] m")
 
 
 class Reachability:
@@ -160,9 +179,51 @@ class Reachability:
         return self.solve(cap_top, axis, (standoff, 0.0)) is not None
 
 
+def cap_gaps(insts: Any) -> np.ndarray:
+    """Each mushroom's horizontal gap from its cap's edge to the nearest neighbouring cap's edge
+    (m; negative where the caps' outlines overlap seen from above; inf alone)."""
+    tops = np.array([inst.cap_top[:2] for inst in insts], float).reshape(-1, 2)
+    radii = np.array([inst.cap_diameter / 2 for inst in insts], float)
+    gaps = np.linalg.norm(tops[:, None] - tops[None], axis=2) - radii[:, None] - radii[None]
+    np.fill_diagonal(gaps, np.inf)
+    return gaps.min(axis=1) if len(insts) > 1 else np.full(len(insts), np.inf)
+
+
+def approach_blocked(insts: Any) -> np.ndarray:
+    """Whether a neighbour's cap reaches into the cylinder (``APPROACH_RADIUS``) the cup sweeps
+    down each mushroom's stem axis from ``APPROACH_HEIGHT`` above its cap top: a neighbour whose
+    cap top stands above the target's cap top along that axis, its cap's edge within the
+    cylinder's radius of the axis."""
+    blocked = np.zeros(len(insts), bool)
+    for i, inst in enumerate(insts):
+        top, axis = np.asarray(inst.cap_top, float), np.asarray(inst.rotation)[:, 2]
+        for j, other in enumerate(insts):
+            rel = np.asarray(other.cap_top, float) - top
+            along = float(rel @ axis)
+            lateral = float(np.linalg.norm(rel - along * axis))
+            if j != i and 0.0 < along < APPROACH_HEIGHT and lateral - other.cap_diameter / 2 < APPROACH_RADIUS:
+                blocked[i] = True
+                break
+    return blocked
+
+
+def target_classes(insts: Any, harvest_diameter: float = HARVEST_DIAMETER) -> dict[str, np.ndarray]:
+    """Each class of :data:`CLASS_RULES` as a boolean mask over the bed's mushrooms: harvest-ready
+    (cap >= ``harvest_diameter``), and among those isolated, crowded, approach-blocked; small (the
+    rest)."""
+    ready = np.array([inst.cap_diameter >= harvest_diameter for inst in insts], bool)
+    gaps = cap_gaps(insts)
+    return {"harvest_ready": ready, "isolated": ready & (gaps >= ISOLATED_GAP),
+            "crowded": ready & (gaps < CROWDED_GAP), "approach_blocked": ready & approach_blocked(insts),
+            "small": ~ready}
+
+
 def select_target(scene: Any, rule: str, rng: np.random.Generator, reach: Reachability,
-                  index: int = 0, max_tilt_deg: float = 45.0) -> tuple[int, bool]:
-    """Returns (instance id, reachable)."""
+                  index: int = 0, max_tilt_deg: float = 45.0,
+                  harvest_diameter: float = HARVEST_DIAMETER) -> tuple[int, bool]:
+    """Returns (instance id, reachable). A class rule with no reachable member in the bed falls
+    back to its first member (unreachable), or, for a bed without the class, to a uniform draw
+    over the bed."""
     if rule not in RULES:
         raise ValueError(f"target rule must be one of {RULES}, got {rule!r}")
     insts = scene.instances
@@ -172,7 +233,10 @@ def select_target(scene: Any, rule: str, rng: np.random.Generator, reach: Reacha
             raise ValueError(f"target index {index} out of range for {n} mushrooms")
         i = int(index)
         return i, _ok(insts[i], reach, max_tilt_deg)
-    if rule == "random":
+    if rule in CLASS_RULES:
+        members = np.flatnonzero(target_classes(insts, harvest_diameter)[rule])
+        order = list(rng.permutation(members)) if len(members) else list(rng.permutation(n))
+    elif rule == "random":
         order = list(rng.permutation(n))
     elif rule == "tallest":
         order = list(np.argsort([-inst.cap_top[2] for inst in insts], kind="stable"))

@@ -94,3 +94,45 @@ def test_a_pose_whose_solve_from_home_stalls_in_the_wrist_singularity_is_solved_
     assert q is not None and np.all((reach.lo <= q) & (q <= reach.hi))
     assert np.linalg.norm(reach._res(q, cap_top + 0.03 * axis, -axis)) < 1e-3
     assert reach.conditioning(q) > 0.1 and reach.path_conditioning(q) > 0.1
+
+
+def _mushroom(x: float, y: float, top: float, diameter: float):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(cap_top=np.array([x, y, top]), cap_diameter=diameter, rotation=np.eye(3))
+
+
+def test_a_neighbours_cap_over_the_approach_blocks_it_and_a_lower_one_does_not():
+    from sms3d_env.targets import approach_blocked, target_classes
+
+    bed = [_mushroom(0.0, 0.0, 0.05, 0.055), _mushroom(0.04, 0.0, 0.07, 0.06), _mushroom(0.5, 0.5, 0.05, 0.03)]
+    assert approach_blocked(bed).tolist() == [True, False, False]
+    classes = target_classes(bed)
+    assert classes["harvest_ready"].tolist() == [True, True, False] and classes["small"].tolist() == [False, False, True]
+    assert classes["crowded"].tolist() == [True, True, False]  # the two big caps' outlines overlap
+
+
+def test_the_class_rules_partition_seeded_beds_as_documented():
+    from sms3d_env.targets import HARVEST_DIAMETER, target_classes
+
+    for seed in range(5):
+        insts = generator.generate_scene(generator.SceneConfig().replace(placement__num_mushrooms=50), seed=seed).instances
+        c = target_classes(insts)
+        sizes = np.array([inst.cap_diameter for inst in insts])
+        assert (c["harvest_ready"] == (sizes >= HARVEST_DIAMETER)).all() and (c["small"] == ~c["harvest_ready"]).all()
+        for cls in ("isolated", "crowded", "approach_blocked"):
+            assert not (c[cls] & ~c["harvest_ready"]).any()
+        assert not (c["isolated"] & c["crowded"]).any()
+
+
+def test_the_harvest_ready_rule_draws_among_harvest_size_caps_not_the_tallest():
+    env = gym.make("SMS3DPick-v1", scene=generator.SceneConfig().replace(placement__num_mushrooms=25),
+                   target="harvest_ready")
+    tallest = gym.make("SMS3DPick-v1", scene=generator.SceneConfig().replace(placement__num_mushrooms=25))
+    same = 0
+    for seed in range(8):
+        _, info = env.reset(seed=seed)
+        inst = env.unwrapped.scene.instances[info["target"]]
+        assert inst.cap_diameter >= 0.05
+        same += info["target"] == tallest.reset(seed=seed)[1]["target"]
+    assert same < 8
