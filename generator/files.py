@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import re
+import shutil
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -12,6 +14,46 @@ from typing import Any
 import cv2
 import numpy as np
 
+#: A temporary's name: ``<stem>.tmp<pid><suffix>`` (:func:`temp_path`).
+_TEMP_NAME = re.compile(r".*\.tmp(?P<pid>\d+)(\.[^.]*)?")
+
+
+def temp_path(path: str | Path) -> Path:
+    """Where this process writes ``path`` before renaming it into place: beside it, with the same
+    suffix and this process's id in the name (``model.tmp1234.zip``), so that two processes never
+    share one and :func:`remove_orphaned_temporaries` knows whose it is."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.tmp{os.getpid()}{path.suffix}")
+
+
+def process_alive(pid: int) -> bool:
+    """Whether a process of id ``pid`` runs now (a process of another user counts)."""
+    try:
+        os.kill(pid, 0)  # signal 0: nothing is sent, only whether the process exists is checked
+    except PermissionError:
+        return True
+    except (OSError, OverflowError):  # ProcessLookupError, or an id no process can have
+        return False
+    return True
+
+
+def remove_orphaned_temporaries(folder: str | Path) -> list[Path]:
+    """Remove the temporaries (:func:`temp_path`, files or folders) in ``folder`` whose process
+    has died: what a killed run (``kill -9``, a power cut) left, which no ``finally`` removed. A
+    live process's are kept. Returns what was removed."""
+    folder = Path(folder)
+    removed = []
+    for entry in folder.iterdir() if folder.is_dir() else ():
+        match = _TEMP_NAME.fullmatch(entry.name)
+        if match is None or process_alive(int(match["pid"])):
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            entry.unlink(missing_ok=True)
+        removed.append(entry)
+    return removed
+
 
 def write_via_temp(path: str | Path, write: Callable[[Path], Any]) -> None:
     """``write(temp)`` to a temporary file beside ``path`` (the same suffix, so that writers that
@@ -19,7 +61,7 @@ def write_via_temp(path: str | Path, write: Callable[[Path], Any]) -> None:
     processes never share one), then rename it into place. A write killed at any moment leaves
     the old file or none, never part of one; a failed one leaves no temporary file behind."""
     path = Path(path)
-    tmp = path.with_name(f"{path.stem}.tmp{os.getpid()}{path.suffix}")
+    tmp = temp_path(path)
     try:
         write(tmp)
         os.replace(tmp, path)

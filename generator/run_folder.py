@@ -5,21 +5,34 @@ the same settings resumes the run; other settings are refused with the differing
 unless the caller asks to ``overwrite`` (start anew, explicitly). A folder holding files that no
 run wrote is never reused silently. The settings file is written only once the caller has
 checked every input, so a refused command leaves the folder as it was.
+
+One process at a time runs in a folder: :func:`open_run_folder` takes an exclusive
+``fcntl.flock`` on the folder's ``run.lock`` and the returned :class:`RunFolder` holds it until it
+is released (``with open_run_folder(...) as run:``) or the process ends, however it ends: the
+operating system drops the lock of a killed process, so no stale lock is ever left to clear by
+hand. A second run in the folder meanwhile is refused, naming the folder and the holder's pid.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
+import os
 import shutil
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from generator.files import write_atomic
 
 #: The settings record in every run folder.
 SETTINGS_FILE = "run_settings.json"
+#: The lock file of every run folder (it holds the running process's id, for the refusal).
+LOCK_FILE = "run.lock"
+#: The errors that say a folder cannot be written to (its mode, a read-only file system).
+_READ_ONLY = (errno.EACCES, errno.EPERM, errno.EROFS)
 
 
 class RunFolderError(ValueError):
@@ -32,10 +45,33 @@ class RunFolderError(ValueError):
 
 @dataclass(frozen=True)
 class RunFolder:
-    """An opened run folder: ``resumed`` when it already held a run with the same settings."""
+    """An opened run folder: ``resumed`` when it already held a run with the same settings;
+    ``writable`` False for a resumed folder this process may not write (a finished run is still
+    read from it: :meth:`check_writable` before writing). Holds the folder's lock until
+    :meth:`release` (or the end of a ``with`` block, or of the process)."""
 
     path: Path
     resumed: bool
+    writable: bool = True
+    _lock: IO[str] | None = field(default=None, repr=False, compare=False)
+
+    def check_writable(self) -> None:
+        """``RunFolderError`` unless the run may write its folder."""
+        if not self.writable:
+            raise RunFolderError(self.path, "holds an unfinished run but is not writable (its permissions or a "
+                                            "read-only file system); make it writable to resume, or use another "
+                                            "--out")
+
+    def release(self) -> None:
+        """Let another process run in the folder (closing the lock file drops its lock)."""
+        if self._lock is not None:
+            self._lock.close()
+
+    def __enter__(self) -> RunFolder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
 
 
 def _normalised(settings: Mapping[str, Any]) -> dict[str, Any]:
@@ -66,6 +102,49 @@ def differing_settings(recorded: Mapping[str, Any], wanted: Mapping[str, Any],
             if k not in free and old.get(k) != new.get(k)]
 
 
+def _run_files(path: Path) -> list[Path]:
+    """What ``path`` holds besides its lock file (a folder that holds only the lock file of a run
+    killed before it recorded its settings is empty)."""
+    return [p for p in path.iterdir() if p.name != LOCK_FILE] if path.is_dir() else []
+
+
+def _empty(path: Path) -> None:
+    """Remove what ``path`` holds but its lock file, which the caller holds: removing it would let
+    another process lock a new one beside this run. The folder itself stays, so that ``path``
+    may be a symbolic link to it."""
+    for entry in _run_files(path):
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+
+
+def lock_run_folder(path: Path) -> IO[str] | None:
+    """The open lock file of the folder ``path`` (made if missing), locked by this process; None
+    when the folder may not be written (nothing to protect: no run can write it).
+    ``RunFolderError`` naming the folder and the holder's pid when another process holds it."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        lock = open(path / LOCK_FILE, "a+", encoding="utf-8")  # noqa: SIM115  (held beyond this call)
+    except OSError as exc:
+        if exc.errno in _READ_ONLY and path.is_dir():
+            return None
+        raise RunFolderError(path, f"cannot be made or written ({exc.strerror})") from None
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock.seek(0)
+        holder = lock.read().strip() or "unknown"
+        lock.close()
+        raise RunFolderError(path, f"another run is in progress in this folder (process {holder} holds "
+                                   f"{LOCK_FILE}); wait for it to end, or use another --out") from None
+    lock.seek(0)
+    lock.truncate()
+    lock.write(str(os.getpid()))
+    lock.flush()
+    return lock
+
+
 def open_run_folder(out: str | Path, settings: Mapping[str, Any], *, overwrite: bool = False,
                     may_change: Iterable[str] = (), may_grow: Iterable[str] = (),
                     flag: str = "--out") -> RunFolder:
@@ -78,27 +157,29 @@ def open_run_folder(out: str | Path, settings: Mapping[str, Any], *, overwrite: 
     - made with other settings: ``RunFolderError`` naming the differing fields, unless
       ``overwrite``, which empties the folder first;
     - holding files without a settings record: ``RunFolderError`` (``overwrite`` never empties a
-      folder that no run made).
+      folder that no run made);
+    - locked by another process's run: ``RunFolderError`` (:func:`lock_run_folder`).
+
+    A resumed folder whose record is unchanged is not written, so that a finished run is read
+    from a folder this process may not write (``writable=False``).
     """
     path = check_out_path(out, flag)
     wanted = _normalised(settings)
     record = path / SETTINGS_FILE
-    if path.is_dir() and any(path.iterdir()):
-        if not record.is_file():
-            # Never emptied, even with ``overwrite``: ``--out . --overwrite`` must not delete a
-            # working folder.
-            raise RunFolderError(path, f"holds files but no {SETTINGS_FILE}, so it is no run of this command; "
-                                       f"use another {flag} (or empty it yourself)")
-        if overwrite:
-            shutil.rmtree(path)
-        else:
-            try:
-                recorded = json.loads(record.read_text(encoding="utf-8"))
-                if not isinstance(recorded, dict):
-                    raise ValueError("not a JSON object")
-            except (OSError, ValueError) as exc:
-                raise RunFolderError(record, f"unreadable settings record ({exc}); use --overwrite to start "
-                                             "anew") from exc
+    existing = bool(_run_files(path))
+    if existing and not record.is_file():
+        # Never emptied, even with ``overwrite``: ``--out . --overwrite`` must not delete a
+        # working folder.
+        raise RunFolderError(path, f"holds files but no {SETTINGS_FILE}, so it is no run of this command; "
+                                   f"use another {flag} (or empty it yourself)")
+    lock = lock_run_folder(path)
+    try:
+        if existing and overwrite:
+            if lock is None:
+                raise RunFolderError(path, "is not writable, so --overwrite cannot empty it")
+            _empty(path)
+        elif existing:
+            recorded = _recorded_settings(record)
             grow = tuple(may_grow)
             differing = differing_settings(recorded, wanted, (*may_change, *grow))
             differing += [f"{k} ({recorded[k]!r} → {wanted[k]!r}: it may only grow)" for k in grow
@@ -107,8 +188,25 @@ def open_run_folder(out: str | Path, settings: Mapping[str, Any], *, overwrite: 
                 raise RunFolderError(path, f"holds a run made with other settings: {', '.join(differing)}; "
                                            f"rerun with the same settings to resume, use another {flag}, "
                                            "or --overwrite to start anew")
-            write_atomic(record, json.dumps(wanted, indent=2))
-            return RunFolder(path, resumed=True)
-    path.mkdir(parents=True, exist_ok=True)
-    write_atomic(record, json.dumps(wanted, indent=2))
-    return RunFolder(path, resumed=False)
+            if lock is not None and recorded != wanted:
+                write_atomic(record, json.dumps(wanted, indent=2))
+            return RunFolder(path, resumed=True, writable=lock is not None, _lock=lock)
+        if lock is None:
+            raise RunFolderError(path, "is not writable (its permissions or a read-only file system)")
+        write_atomic(record, json.dumps(wanted, indent=2))
+        return RunFolder(path, resumed=False, _lock=lock)
+    except BaseException:
+        if lock is not None:
+            lock.close()
+        raise
+
+
+def _recorded_settings(record: Path) -> dict[str, Any]:
+    """The settings a run folder's ``record`` holds; ``RunFolderError`` naming it if unreadable."""
+    try:
+        recorded = json.loads(record.read_text(encoding="utf-8"))
+        if not isinstance(recorded, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError) as exc:
+        raise RunFolderError(record, f"unreadable settings record ({exc}); use --overwrite to start anew") from exc
+    return recorded

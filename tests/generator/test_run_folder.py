@@ -2,13 +2,25 @@
 
 from __future__ import annotations
 
+import ctypes
 import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from generator.run_folder import SETTINGS_FILE, RunFolderError, differing_settings, open_run_folder
+from generator.run_folder import (
+    LOCK_FILE,
+    SETTINGS_FILE,
+    RunFolderError,
+    differing_settings,
+    open_run_folder,
+)
 
 
 def test_a_new_folder_records_its_settings(tmp_path):
@@ -83,3 +95,65 @@ settings = st.dictionaries(st.text(min_size=1, max_size=5),
 def test_differing_settings_is_empty_exactly_when_the_records_agree(a, b):
     assert (differing_settings(a, b) == []) == (json.loads(json.dumps(a)) == json.loads(json.dumps(b)))
     assert differing_settings(a, b, may_change=set(a) | set(b)) == []
+
+
+def test_a_second_run_in_a_locked_folder_is_refused_naming_the_folder_and_holder(tmp_path):
+    with open_run_folder(tmp_path / "run", {"lr": 1e-3}):
+        with pytest.raises(RunFolderError, match=rf"{tmp_path / 'run'}: another run is in progress .*process "
+                                                 rf"{os.getpid()}"):
+            open_run_folder(tmp_path / "run", {"lr": 1e-3})
+    assert open_run_folder(tmp_path / "run", {"lr": 1e-3}).resumed  # released at the block's end
+
+
+def test_the_lock_of_a_killed_process_is_released_by_the_os(tmp_path):
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from generator.run_folder import "
+                               "open_run_folder; run = open_run_folder(sys.argv[1], {'lr': 1}); print(flush=True); "
+                               "time.sleep(60)", str(tmp_path)], stdout=subprocess.PIPE, text=True)
+    try:
+        holder.stdout.readline()  # the folder is locked
+        with pytest.raises(RunFolderError, match=f"process {holder.pid} holds {LOCK_FILE}"):
+            open_run_folder(tmp_path, {"lr": 1})
+    finally:
+        holder.send_signal(signal.SIGKILL)
+        holder.wait()
+    assert open_run_folder(tmp_path, {"lr": 1}).resumed
+
+
+def test_overwrite_empties_a_folder_reached_through_a_symbolic_link(tmp_path):
+    (tmp_path / "real").mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(tmp_path / "real", target_is_directory=True)
+    open_run_folder(link, {"lr": 1e-3})
+    (link / "checkpoints").mkdir()
+    (link / "checkpoints" / "ppo_8_steps.zip").write_bytes(b"old")
+    run = open_run_folder(link, {"lr": 1e-2}, overwrite=True)
+    assert not run.resumed and link.is_symlink()
+    assert sorted(p.name for p in (tmp_path / "real").iterdir()) == [LOCK_FILE, SETTINGS_FILE]
+
+
+def _without_root_override() -> None:
+    """Drop, for a child run by root, the capabilities that let root write a read-only folder
+    (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, CAP_FOWNER), so that the folder is read-only to it."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    for capability in (1, 2, 3):
+        if libc.prctl(24, capability, 0, 0, 0) != 0:  # PR_CAPBSET_DROP
+            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+def test_a_read_only_folder_resumes_without_writing_and_refuses_to_run(tmp_path):
+    folder = tmp_path / "run"
+    open_run_folder(folder, {"lr": 1e-3}).release()
+    (folder / LOCK_FILE).unlink()  # as a folder copied from elsewhere might be
+    for p in (tmp_path, folder, *folder.iterdir()):
+        p.chmod(0o555 if p.is_dir() else 0o444)
+    before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir()}
+    script = ("import sys; from generator.run_folder import RunFolderError, open_run_folder\n"
+              "run = open_run_folder(sys.argv[1], {'lr': 1e-3})\n"
+              "print(run.resumed, run.writable)\n"
+              "try:\n    run.check_writable()\nexcept RunFolderError as e:\n    print(e)\n")
+    done = subprocess.run([sys.executable, "-c", script, str(folder)], capture_output=True, text=True,
+                          preexec_fn=_without_root_override if os.geteuid() == 0 else None, cwd=Path(__file__).parents[2],
+                          check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[0] == "True False" and "not writable" in done.stdout
+    assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} == before
