@@ -4,7 +4,11 @@ percentile), over held-out seeded 25-mushroom beds (seeds from 1,000,000). Each 
 cell runs in a worker process.
 
 Usage: python benchmarks/bench_robots.py [--episodes 200] [--robots gantry jaco]
-       [--errors 0 10 20 30] [--substeps 10] [--workers 2] [--json FILE]
+       [--errors 0 10 20 30] [--substeps 10] [--target tallest] [--physics lip_seal=1 ...]
+       [--workers 2] [--json FILE]
+
+``--physics NAME=VALUE`` sets fields of ``PickPhysicsParams`` (e.g. ``lip_seal=1
+lip_compliance=0.003 clean_pick=1``), the robot's cup radius kept unless given.
 
 ``--json`` also keeps each episode's outcome (success or failure cause, by seed), so that two runs
 that differ in one setting (e.g. ``--substeps``) compare episode by episode.
@@ -28,7 +32,31 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 HELD_OUT_SEED = 1_000_000
 
 
-def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = ControllerConfig.substeps) -> dict:
+def physics_overrides(items: list[str]) -> dict[str, float]:
+    """``["lip_seal=1", "lip_compliance=0.003"]`` as ``PickPhysicsParams`` field values (the
+    field's own type: a bool field reads 0/1/true/false); ``SystemExit`` naming a bad item."""
+    import dataclasses
+
+    from sms3d_env.physics_params import PickPhysicsParams
+
+    fields = {f.name: f.type for f in dataclasses.fields(PickPhysicsParams)}
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in fields:
+            raise SystemExit(f"--physics: {item!r} is not NAME=VALUE with NAME a PickPhysicsParams field "
+                             f"({', '.join(fields)})")
+        try:
+            out[name] = (value.lower() in ("1", "true")) if fields[name] == "bool" else float(value)
+        except ValueError:
+            raise SystemExit(f"--physics: {name} needs a number, got {value!r}") from None
+    return out
+
+
+def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = ControllerConfig.substeps,
+             target: str = "tallest", physics: dict | None = None) -> dict:
+    from dataclasses import replace
+
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the ids)
@@ -38,7 +66,11 @@ def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = Contro
 
     env = gym.make("SMS3DPick-v1", robot=robot, scene=SceneConfig().replace(placement__num_mushrooms=25),
                    pose_source="noisy" if error_deg else "oracle", pose_error_deg=error_deg,
-                   controller=ControllerConfig(substeps=substeps))
+                   controller=ControllerConfig(substeps=substeps), target=target)
+    if physics:  # the env's own defaults for its robot (its cup radius), with these fields set
+        params = replace(env.unwrapped.params, **physics)
+        env.close()
+        env = gym.make(env.spec, physics=params)
     picker = ScriptedPicker.for_env(env)
     outcomes, times = [], []
     for seed in range(HELD_OUT_SEED, HELD_OUT_SEED + episodes):
@@ -48,13 +80,14 @@ def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = Contro
             times.append(result["time_s"])
     causes = collections.Counter(outcomes)
     return {"robot": robot, "error_deg": error_deg, "episodes": episodes, "substeps": substeps,
+            "target": target, "physics": physics or {},
             "success": causes.pop("success", 0), "failures": dict(causes),
             "time_median_s": float(np.median(times)) if times else None,
             "time_p90_s": float(np.percentile(times, 90)) if times else None,
             "first_seed": HELD_OUT_SEED, "outcomes": outcomes}
 
 
-def _cell(args: tuple[str, float, int, int]) -> dict:
+def _cell(args: tuple) -> dict:
     return run_cell(*args)
 
 
@@ -65,10 +98,14 @@ def main() -> None:
     parser.add_argument("--errors", type=float, nargs="+", default=[0.0, 10.0, 20.0, 30.0])
     parser.add_argument("--substeps", type=int, default=ControllerConfig.substeps,
                         help="physics steps per 40 ms control step (ControllerConfig.substeps; default 10 x 4 ms)")
+    parser.add_argument("--target", default="tallest", help="the env's target rule (default tallest)")
+    parser.add_argument("--physics", nargs="*", default=[], metavar="NAME=VALUE",
+                        help="PickPhysicsParams fields to set, e.g. lip_seal=1 lip_compliance=0.003")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", default=None, help="also write the rows here")
     args = parser.parse_args()
-    cells = [(r, e, args.episodes, args.substeps) for r in args.robots for e in args.errors]
+    physics = physics_overrides(args.physics)
+    cells = [(r, e, args.episodes, args.substeps, args.target, physics) for r in args.robots for e in args.errors]
     with get_context("spawn").Pool(args.workers) as pool:
         # imap keeps the cells' order; the bar counts finished (robot, error) cells.
         rows = list(tqdm(pool.imap(_cell, cells), total=len(cells), desc="robot x error cells"))
