@@ -18,12 +18,20 @@ from sms3d_env.physics_params import PickPhysicsParams
 SOIL_CONTYPE, SOIL_CONAFFINITY = 1, 8  # the tool only; detached mushrooms via their conaffinity
 ROOTED_CONTYPE, ROOTED_CONAFFINITY = 4, 2  # touch the robot only
 # Detached: the robot, and the soil once clear of it (its stem base starts sunk in). KNOWN
-# SIMPLIFICATION: a detached mushroom does not collide with other mushrooms. MuJoCo collides mesh
-# geoms through their convex hulls, and in clusters the hulls of touching caps overlap by several
-# millimetres (the real meshes do not, see the placement overlap test): switching those contacts on
-# at detachment throws the pair apart with 10 N. Neighbours are still disturbed by the tool.
+# SIMPLIFICATION unless ``mushrooms_collide``: mushrooms do not collide with each other. The
+# paper's placement lets two mushrooms' volumes overlap by up to 5 % (IoU), which leaves their
+# collision hulls interpenetrating by up to 28 mm in 100-mushroom beds (measured); contacts
+# switched on there throw the pair apart. Beds placed with no overlap start clear of each other.
 FREE_CONTYPE, FREE_CONAFFINITY = 4, 2
 LIFTED_CONAFFINITY = 1 | 2
+# With ``PickPhysicsParams.mushrooms_collide`` every mushroom, rooted or loose, also collides with
+# every other (this bit in each conaffinity); the bed's collision hulls must then not
+# interpenetrate at rest (``world.interpenetrating_mushrooms``): beds placed with
+# ``placement.overlap_iou = 0``.
+MUSHROOM_CONTACT = ROOTED_CONTYPE
+#: Deepest interpenetration (m) of two mushrooms' collision hulls a bed may start with when
+#: mushrooms collide: deeper, and the contact would throw the pair apart at the first step.
+MAX_REST_PENETRATION = 0.001
 # Hand only: a static "socket" under each free mushroom's stem base holds it from below once it
 # is detached (bit 16 on the socket, in the detached mushroom's conaffinity). A stem starts sunk
 # 2-9 mm into the soil, so soil contacts wait for the lift; the suction cup holds a detached

@@ -73,6 +73,11 @@ class PickPhysicsParams:
             force is ``holding_force (1 - exp(-t / evacuation_time))`` t seconds after sealing
             (with ``lip_seal``). ASSUMPTION: no source for a small cup's evacuation time (hose
             and ejector dependent); 50 ms, a short hose on a venturi ejector.
+        mushrooms_collide: every mushroom collides with every other, rooted or loose, so a lifted
+            cap pushes, drags or scrapes its neighbours. The bed's collision hulls must not
+            interpenetrate at rest (more than 1 mm): generated beds need
+            ``placement.overlap_iou = 0``; a bed that does is refused at reset. False: mushrooms
+            touch only the robot and the soil (v0, v1).
         clean_pick: success needs a clean pick, as a grower judges it: besides the target picked
             unbruised, no neighbour moved further than ``disturb_tolerance`` or knocked off its
             roots (``info["neighbours_disturbed"]``; ``info["target_picked"]`` says whether the
@@ -99,6 +104,7 @@ class PickPhysicsParams:
     lip_points: int = 16
     evacuation_time: float = 0.05
     clean_pick: bool = False
+    mushrooms_collide: bool = False
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():

@@ -283,7 +283,7 @@ class SMS3DPickEnv(gym.Env):
         ctrl = self.ctrl_cfg
         self.world = w = build_world(scene, target, self.robot_cfg, self.scene_source.config.free_radius,
                                      ctrl.control_dt / ctrl.substeps, self.scene_source.models,
-                                     self._model_key(slot, target))
+                                     self._model_key(slot, target), self.params.mushrooms_collide)
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
         self.done = False
         m, d = w.model, w.data

@@ -197,10 +197,12 @@ def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float) ->
 
 def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | None,
                 timestep: float, cache: dict[Any, mujoco.MjModel] | None = None,
-                cache_key: Any = None) -> World:
+                cache_key: Any = None, mushrooms_collide: bool = False) -> World:
     """Assemble the world; with ``cache`` and ``cache_key``, the compiled model is kept there
     and copied (3 ms against 45 ms for a compile), as an episode changes its model (contact
-    masks, weld data)."""
+    masks, weld data). ``mushrooms_collide``: every mushroom also collides with every other
+    (``ValueError`` naming the pair when two of the bed's collision hulls interpenetrate at
+    rest by more than ``physics.MAX_REST_PENETRATION``)."""
     n = len(scene.instances)
     free = free_set(scene, target, free_radius)
     suction = robot.tool == "suction"
@@ -230,13 +232,14 @@ def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | 
     # nothing: out of the broadphase, ~25 % off each physics step (50 mushrooms). KNOWN
     # SIMPLIFICATION: the tool passes through mushrooms more than free_radius from the target.
     free_mask = is_free.astype(int)
+    each_other = ph.MUSHROOM_CONTACT if mushrooms_collide else 0
     for g in np.concatenate([cap_geoms, stem_geoms]):
         f = free_mask[geom_mushroom[g]]
         m.geom_contype[g] = ph.ROOTED_CONTYPE * f
-        m.geom_conaffinity[g] = ph.ROOTED_CONAFFINITY * f
+        m.geom_conaffinity[g] = (ph.ROOTED_CONAFFINITY | each_other) * f
     # The broadphase prunes with per-body unions of the geom masks: keep them in step.
     m.body_contype[body_ids] = ph.ROOTED_CONTYPE * free_mask
-    m.body_conaffinity[body_ids] = ph.ROOTED_CONAFFINITY * free_mask
+    m.body_conaffinity[body_ids] = (ph.ROOTED_CONAFFINITY | each_other) * free_mask
     m.body_contype[0] |= ph.SOIL_CONTYPE
     m.body_conaffinity[0] |= ph.SOIL_CONAFFINITY
     robot_geom = np.zeros(m.ngeom, bool)
@@ -245,6 +248,14 @@ def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | 
     cup_geom = m.geom(prefix + CUP_GEOM).id if suction else -1  # -1: the seal test never fires
     force, torque = m.sensor(prefix + WRIST_FORCE), m.sensor(prefix + WRIST_TORQUE)
     socket = 0 if suction else ph.SOCKET_CONAFFINITY
+    if mushrooms_collide:
+        overlaps = interpenetrating_mushrooms(m, geom_mushroom)
+        if overlaps:
+            (i, j), depth = overlaps[0]
+            raise ValueError(f"the bed's mushrooms {i} and {j} interpenetrate by {depth * 1000:.1f} mm at rest "
+                             f"({len(overlaps)} pairs deeper than {ph.MAX_REST_PENETRATION * 1000:g} mm): with "
+                             "PickPhysicsParams.mushrooms_collide every mushroom collides with every other, so the "
+                             "bed must not interpenetrate; generate it with placement.overlap_iou = 0")
     return World(
         model=m, data=d, scene=scene, tool=robot.tool, prefix=prefix, is_free=is_free,
         free_ids=np.array(sorted(free)), body_ids=body_ids, cap_geoms=cap_geoms,
@@ -261,6 +272,24 @@ def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | 
         arm_dadr=np.array([m.jnt_dofadr[m.joint(prefix + j).id] for j in robot.joints]),
         wrench_adr=np.r_[force.adr[0]:force.adr[0] + 3, torque.adr[0]:torque.adr[0] + 3],
         cap_radius=np.array([inst.cap_diameter / 2 for inst in scene.instances]),
-        free_aff=ph.FREE_CONAFFINITY | socket, lifted_aff=ph.LIFTED_CONAFFINITY | socket,
+        free_aff=ph.FREE_CONAFFINITY | socket | each_other, lifted_aff=ph.LIFTED_CONAFFINITY | socket | each_other,
         cup_mask=(int(m.geom_contype[cup_geom]), int(m.geom_conaffinity[cup_geom])) if suction else (0, 0),
     )
+
+
+def interpenetrating_mushrooms(model: mujoco.MjModel, geom_mushroom: np.ndarray,
+                               tolerance: float = ph.MAX_REST_PENETRATION) -> list[tuple[tuple[int, int], float]]:
+    """Pairs of mushrooms whose collision hulls interpenetrate by more than ``tolerance`` (m) in
+    ``model``'s rest pose, deepest first, with their depth: collision detection on a scratch
+    copy with sleeping off (a sleeping island's bodies are not collided)."""
+    scratch = copy.copy(model)
+    scratch.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    data = mujoco.MjData(scratch)
+    mujoco.mj_forward(scratch, data)
+    depth: dict[tuple[int, int], float] = {}
+    for c in range(data.ncon):
+        i, j = (int(geom_mushroom[g]) for g in data.contact.geom[c])
+        if i >= 0 and j >= 0 and i != j and -data.contact.dist[c] > tolerance:
+            key = (min(i, j), max(i, j))
+            depth[key] = max(depth.get(key, 0.0), float(-data.contact.dist[c]))
+    return sorted(depth.items(), key=lambda item: -item[1])

@@ -54,3 +54,45 @@ def test_only_mushrooms_within_the_free_radius_move_and_meet_the_robot(bed, upri
             assert can_touch(m, g, world.cup_geom) is moves, m.geom(g).name
             assert any(can_touch(m, g, r) for r in robot) is moves
             assert not can_touch(m, g, world.terrain_geom)  # rooted: the soil waits for the lift
+
+
+def _colliding_env(num_mushrooms: int, overlap_iou: float = 0.0, collide: bool = True):
+    from sms3d_env.physics_params import PickPhysicsParams
+
+    bed = SceneConfig().replace(placement__num_mushrooms=num_mushrooms, placement__overlap_iou=overlap_iou)
+    return gym.make("SMS3DPick-v1", scene=bed, physics=PickPhysicsParams(mushrooms_collide=collide))
+
+
+@pytest.mark.parametrize("collide", [False, True])
+def test_a_loose_cap_dropped_on_a_neighbour_touches_it_only_when_mushrooms_collide(collide):
+    import mujoco
+
+    env = _colliding_env(10, collide=collide)
+    env.reset(seed=3)
+    w = env.unwrapped.world
+    m, d = w.model, w.data
+    i, j = 0, 1
+    # Drop mushroom j's cap onto mushroom i's: free it from its root and move it above i.
+    d.eq_active[w.root_eq[j]] = 0
+    adr = m.jnt_qposadr[m.body_jntadr[w.body_ids[j]]]
+    d.qpos[adr:adr + 3] = d.xpos[w.body_ids[i]] + [0.0, 0.0, 0.01]
+    m.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    mujoco.mj_forward(m, d)
+    pairs = {tuple(sorted(w.geom_mushroom[g] for g in d.contact.geom[c])) for c in range(d.ncon)}
+    assert ((i, j) in pairs) is collide
+
+
+def test_seeded_100_mushroom_beds_placed_without_overlap_do_not_interpenetrate_at_rest():
+    from sms3d_env.world import interpenetrating_mushrooms
+
+    env = _colliding_env(100)
+    for seed in (1_000_000, 1_000_001):
+        env.reset(seed=seed)  # refused if any pair interpenetrated by more than 1 mm
+        w = env.unwrapped.world
+        assert interpenetrating_mushrooms(w.model, w.geom_mushroom) == []
+
+
+def test_a_bed_whose_mushrooms_interpenetrate_is_refused_when_they_collide():
+    env = _colliding_env(25, overlap_iou=0.05)  # the paper's placement lets volumes overlap by 5 %
+    with pytest.raises(ValueError, match=r"interpenetrate by .* mm at rest.*overlap_iou = 0"):
+        env.reset(seed=1_000_000)
