@@ -1,6 +1,8 @@
 """Pickers by name, for the study and the benchmarks: ``"scripted"``, ``"policy[:PATH]"`` (a
 saved SB3 policy; no path: the shipped one) or ``"residual[:PATH]"`` (a residual policy on top of
-the scripted picker; no path: the shipped descend trigger).
+the scripted picker; no path: the shipped descend trigger). ``"policy@ENV_ID:PATH"`` names the
+env of a model whose files do not say it (one saved by SB3's own ``save``), as ``eval-policy
+--env-id`` does.
 
 A learned picker runs on the env id and options it was trained with (the ``config.json`` of its
 run: beside the model or, for a checkpoint, in its run folder), so ``make_picker_env`` builds
@@ -27,10 +29,11 @@ SCRIPTED_ENV_ID = "SMS3DPick-v1"
 @dataclass(frozen=True)
 class PickerSpec:
     """``kind`` in ``PICKER_KINDS``; ``path`` the model (None: the shipped policy, or for a
-    residual the shipped descend trigger)."""
+    residual the shipped descend trigger); ``env_id`` its env where its files do not say it."""
 
     kind: str = "scripted"
     path: str | None = None
+    env_id: str | None = None
 
     @property
     def label(self) -> str:
@@ -57,15 +60,21 @@ def picker_name(label: str) -> str:
 def parse_picker(text: str) -> PickerSpec:
     """``"scripted"``, ``"policy[:PATH]"`` or ``"residual[:PATH]"`` (ValueError naming the picker
     otherwise; a missing model file raises FileNotFoundError)."""
-    kind, _, path = str(text).partition(":")
+    from sms3d_env.training.policy_spec import package_env_ids
+
+    name, _, path = str(text).partition(":")
+    kind, at, env_id = name.partition("@")
     if kind not in PICKER_KINDS:
         raise ValueError(f"picker must be one of {PICKER_KINDS} (policy/residual with an optional :PATH), "
                          f"got {text!r}")
     if kind == "scripted" and path:
         raise ValueError(f"the scripted picker takes no model path, got {text!r}")
+    if at and not (kind == "policy" and path and env_id in package_env_ids()):
+        raise ValueError(f"policy@ENV_ID:PATH names the env of a saved policy, ENV_ID one of "
+                         f"{', '.join(package_env_ids())}; got {text!r}")
     if path and not Path(path).is_file():
         raise FileNotFoundError(f"picker model not found: {path}")
-    return PickerSpec(kind, path or None)
+    return PickerSpec(kind, path or None, env_id or None)
 
 
 def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
@@ -85,6 +94,6 @@ def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     # study's worker processes would oversubscribe the cores (2 workers x 2 threads on 2 cores
     # ran the policy sweep ~2.5x slower).
     torch.set_num_threads(1)
-    actor = PolicyActor(spec.model_path)
+    actor = PolicyActor(spec.model_path, env_id=spec.env_id)
     env = actor.make_env(**env_kwargs)
     return env, actor

@@ -24,6 +24,7 @@ import inspect
 import io
 import json
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -32,13 +33,29 @@ import numpy as np
 from sms3d_env.env_args import translate_legacy_options
 from sms3d_env.training.config import ALGOS
 from sms3d_env.training.model_files import (
+    MAX_MODEL_BYTES,
     OBS_STATS_FILE,
     POLICY_SPEC_MEMBER,
     ObservationStats,
     PolicyFileError,
+    check_file_size,
+    check_zip_sizes,
+    model_member_limit,
+    parse_json,
     read_policy_spec,
+    read_run_text,
 )
-from sms3d_env.training.policy_spec import PolicySpec, algorithm_class, policy_kwargs_from_json
+from sms3d_env.training.policy_spec import (
+    PolicySpec,
+    algorithm_class,
+    described_algo,
+    described_space_signature,
+    package_env_ids,
+    policy_kwargs_from_json,
+    space_signature,
+)
+from sms3d_env.training.quoting import clipped, described_error
+from sms3d_env.training.trained_env import checked_env_id, chosen_env_id, match_env
 from sms3d_env.training.zoo import read_vecnormalize, zoo_run_of
 
 #: The shipped pick policy (``model.zip`` with its ``config.json``, ``README.md``, metrics).
@@ -85,10 +102,7 @@ def checkpoint_path(folder: str | Path, algo: str, steps: int, part: str = "mode
 
 def read_saved_config(path: Path) -> dict[str, Any]:
     """A run's ``config.json`` (``PolicyFileError`` naming it when it is no JSON object)."""
-    try:
-        saved = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:  # JSONDecodeError and UnicodeDecodeError
-        raise PolicyFileError(path, f"not a readable run configuration ({exc})") from None
+    saved = parse_json(read_run_text(path, "run configuration"), path, "the run configuration")
     if not isinstance(saved, dict):
         raise PolicyFileError(path, "not a run configuration (no JSON object)")
     return saved
@@ -187,6 +201,99 @@ def _trusted_entries(path: Path, data: dict[str, Any], spec: PolicySpec,
     return trusted
 
 
+#: What SB3's ``save`` writes into a model's ``pytorch_variables.pth`` (its ``_get_torch_save_params``):
+#: SAC's entropy coefficient, for PPO nothing. SB3's ``load`` sets each entry of the file as the
+#: model attribute it names, so any other entry would overwrite a part of the model.
+TORCH_VARIABLES = {"ppo": (), "sac": ("log_ent_coef", "ent_coef_tensor")}
+TORCH_VARIABLES_MEMBER = "pytorch_variables.pth"
+
+
+@dataclass(frozen=True)
+class ModelZip:
+    """An SB3 model zip as read once (SB3 loads these bytes, not the file again, which could have
+    changed since): its bytes, the archive over them, its ``data`` JSON and its policy
+    description (``None`` when it holds no :data:`~sms3d_env.training.model_files.POLICY_SPEC_MEMBER`)."""
+
+    raw: bytes
+    archive: zipfile.ZipFile
+    data: dict[str, Any]
+    spec: PolicySpec | None
+
+
+def read_model_zip(path: Path, names: str = "PPO/SAC") -> ModelZip:
+    """The model zip at ``path``, no member inflated past its limit
+    (:func:`~sms3d_env.training.model_files.check_zip_sizes`); ``PolicyFileError`` naming the file
+    when it is no SB3 ``names`` model, is cut short or too large, or its policy description is none."""
+    def cut(exc: BaseException) -> PolicyFileError:
+        return PolicyFileError(path, f"not a stable-baselines3 {names} model, or cut short ({described_error(exc)}); "
+                                     "retrain it or copy it again")
+
+    try:
+        check_file_size(path, MAX_MODEL_BYTES, "model")
+        raw = path.read_bytes()
+        archive = zipfile.ZipFile(io.BytesIO(raw))
+    except PolicyFileError:
+        raise
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise cut(exc) from None
+    check_zip_sizes(path, archive, model_member_limit, MAX_MODEL_BYTES)
+    try:
+        data = json.loads(archive.read("data"))
+        if not isinstance(data, dict):
+            raise ValueError("its data is no JSON object")
+    except (OSError, KeyError, ValueError, RecursionError, zipfile.BadZipFile, EOFError) as exc:
+        raise cut(exc) from None
+    try:
+        spec = read_policy_spec(archive)
+    except (ValueError, zipfile.BadZipFile) as exc:
+        raise PolicyFileError(path, f"its {POLICY_SPEC_MEMBER} is no policy description ({exc})") from None
+    return ModelZip(raw, archive, data, spec)
+
+
+def _record_command(path: Path) -> str:
+    """A shell command that adds a policy description to ``path``: the path a Python literal
+    (``repr``) inside one shell word (``shlex.quote``), so that no quote or ``$(...)`` in a file
+    name breaks it or runs when it is pasted."""
+    import shlex
+
+    code = f"from sms3d_env.training.model_files import record_policy_spec; record_policy_spec({str(path)!r})"
+    return f"python -c {shlex.quote(code)}"
+
+
+def _check_torch_variables(path: Path, archive: zipfile.ZipFile, algo: str) -> None:
+    """``PolicyFileError`` naming the file when its :data:`TORCH_VARIABLES_MEMBER` is no mapping
+    of finite tensors named in :data:`TORCH_VARIABLES` (read as tensors only, ``weights_only``)."""
+    import torch
+
+    if TORCH_VARIABLES_MEMBER not in archive.namelist():
+        return
+    member = f"{path}: {TORCH_VARIABLES_MEMBER}"
+    try:
+        variables = torch.load(io.BytesIO(archive.read(TORCH_VARIABLES_MEMBER)), weights_only=True, map_location="cpu")
+    except Exception as exc:  # noqa: BLE001  (torch raises UnpicklingError, RuntimeError, ... for bad files)
+        raise PolicyFileError(member, f"not readable tensors ({described_error(exc)})") from None
+    if not isinstance(variables, dict):
+        raise PolicyFileError(member, f"not a mapping of tensors ({type(variables).__name__})")
+    unexpected = sorted(str(k) for k in set(variables) - set(TORCH_VARIABLES[algo]))
+    if unexpected:
+        raise PolicyFileError(member, f"entries {clipped(repr(unexpected))}, which loading would set as attributes "
+                                      f"of the model; a {algo.upper()} model's are "
+                                      f"{', '.join(TORCH_VARIABLES[algo]) or 'none'}")
+    for name, value in variables.items():
+        if value is not None and not (isinstance(value, torch.Tensor) and torch.isfinite(value).all()):
+            raise PolicyFileError(member, f"{name}: not a tensor of finite values")
+
+
+def _check_finite_weights(path: Path, model: Any) -> None:
+    """``PolicyFileError`` naming the file and parameter when a weight of ``model``'s policy is NaN
+    or infinite (the policy would act NaN from its first step)."""
+    import torch
+
+    for name, tensor in model.policy.state_dict().items():
+        if tensor.is_floating_point() and not torch.isfinite(tensor).all():
+            raise PolicyFileError(path, f"policy.pth: {name} holds values that are not finite (NaN or infinite)")
+
+
 def load_sb3(path: str | Path, algos: tuple[str, ...], spec: PolicySpec | None = None,
              hyperparameters: dict[str, Any] | None = None, env: Any = None, device: str = "cpu") -> Any:
     """A PPO/SAC model from ``path`` without unpickling anything in it: SB3's ``load`` with every
@@ -196,55 +303,52 @@ def load_sb3(path: str | Path, algos: tuple[str, ...], spec: PolicySpec | None =
     model may be; ``hyperparameters``: values for pickled constructor arguments (a resumed run's
     learning-rate schedule); ``env``: the env to go on training in.
 
-    ``PolicyFileError`` naming the file when it is no SB3 model (or cut short), holds no
-    description of its policy (saved by an earlier version, by RL Baselines3 Zoo or SB3 itself:
-    :func:`~sms3d_env.training.model_files.record_policy_spec` adds one to a file you trust), is
-    of another algorithm, or does not load as the policy it describes."""
+    ``PolicyFileError`` naming the file when it is no SB3 model (or cut short, or a member
+    inflates past its limit), holds no description of its policy (saved by an earlier version,
+    by RL Baselines3 Zoo or SB3 itself: :func:`~sms3d_env.training.model_files.record_policy_spec`
+    adds one to a file you trust), is of another algorithm, does not load as the policy it
+    describes, or holds weights that are not finite or variables that are not its own."""
     path = Path(path)
     names = "/".join(a.upper() for a in algos)
-    # Read once: SB3 loads these bytes, not the file again, which could have changed since.
-    try:
-        raw = path.read_bytes()
-        archive = zipfile.ZipFile(io.BytesIO(raw))
-        data = json.loads(archive.read("data").decode("utf-8"))
-        if not isinstance(data, dict):
-            raise ValueError("its data is no JSON object")
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise PolicyFileError(path, f"not a stable-baselines3 {names} model, or cut short ({type(exc).__name__}: "
-                                    f"{exc}); retrain it or copy it again") from None
-    try:
-        recorded = read_policy_spec(archive)
-    except (ValueError, zipfile.BadZipFile) as exc:
-        raise PolicyFileError(path, f"its {POLICY_SPEC_MEMBER} is no policy description ({exc})") from None
-    spec = spec if spec is not None else recorded
+    model_zip = read_model_zip(path, names)
+    spec = spec if spec is not None else model_zip.spec
     if spec is None:
         raise PolicyFileError(path, f"holds no {POLICY_SPEC_MEMBER}, the description of its policy that loading it "
                                     "without unpickling needs (it was saved by an earlier version or by other code); "
-                                    "if you trust the file, add one with python -c \"from "
-                                    "sms3d_env.training.model_files import record_policy_spec; "
-                                    f"record_policy_spec('{path}')\" (that load runs code pickled in it)")
+                                    f"if you trust the file, add one with {_record_command(path)} (that load runs "
+                                    "code pickled in it)")
     if spec.algo not in algos:
         raise PolicyFileError(path, f"is a {spec.algo.upper()} model, not {names}")
-    trusted = _trusted_entries(path, data, spec, hyperparameters or {})
+    trusted = _trusted_entries(path, model_zip.data, spec, hyperparameters or {})
+    _check_torch_variables(path, model_zip.archive, spec.algo)
     try:
-        return algorithm_class(spec.algo).load(io.BytesIO(raw), env=env, device=device, custom_objects=trusted)
+        model = algorithm_class(spec.algo).load(io.BytesIO(model_zip.raw), env=env, device=device,
+                                                custom_objects=trusted)
     except Exception as exc:  # noqa: BLE001  (SB3 raises AssertionError, KeyError, ValueError, RuntimeError, ...)
         raise PolicyFileError(path, f"does not load as the {spec.algo.upper()} {spec.policy} it describes "
-                                    f"({type(exc).__name__}: {exc})") from None
+                                    f"({described_error(exc)})") from None
+    _check_finite_weights(path, model)
+    return model
 
 
 class PolicyActor:
     """A saved SB3 model as ``actor(obs) -> action``, its observation statistics applied when they
-    were saved with it (:func:`observation_stats_path`). ``env_id``/``env_options``: what it was trained on
-    (:func:`saved_config_path`, else an rl_zoo3 run's files (:func:`~sms3d_env.training.zoo.zoo_run_of`);
-    ``SMS3DPick-v0`` with no options if there is neither).
+    were saved with it (:func:`observation_stats_path`). ``env_id``/``env_options``: what it was
+    trained on: the env its record names (:func:`saved_config_path`, else an rl_zoo3 run's files
+    (:func:`~sms3d_env.training.zoo.zoo_run_of`), else the zip's policy description), else the
+    ``env_id`` given, else the one registered env whose spaces are the model's
+    (:func:`~sms3d_env.training.trained_env.match_env`); options only from a record. A model
+    saved by SB3's own ``save`` (no record, no description) runs too: its policy is built for the
+    spaces of that env (:meth:`_matched_spec`).
 
     Files that cannot be used raise ``PolicyFileError`` naming them, here or, for a
     ``config.json`` whose env does not give the observation the policy was trained on, in
-    :meth:`make_env` (before any step). Loading runs no code from the files (:func:`load_sb3`;
-    an rl_zoo3 run's policy is built for the spaces of the env it names)."""
+    :meth:`make_env` (before any step); an ``env_id`` that is none of the package's or differs
+    from the record, ``ConfigError`` naming ``env_id``. Loading runs no code from the files
+    (:func:`load_sb3`; an env a file names is one of the package's registered ids)."""
 
-    def __init__(self, model_path: str | Path, algo: str | None = None, deterministic: bool = True) -> None:
+    def __init__(self, model_path: str | Path, algo: str | None = None, deterministic: bool = True,
+                 env_id: str | None = None) -> None:
         path = Path(model_path)
         if not path.is_file():
             raise FileNotFoundError(f"model not found: {path}")
@@ -253,7 +357,10 @@ class PolicyActor:
         zoo_run = zoo_run_of(path) if self.config_path is None else None
         self.saved: dict[str, Any] = (read_saved_config(self.config_path) if self.config_path is not None
                                       else zoo_run.saved_config() if zoo_run is not None else {})
-        self.env_id = self.saved.get("env_id", "SMS3DPick-v0")
+        recorded = self.saved.get("env_id")
+        record = self.config_path if zoo_run is None else zoo_run.params / "args.yml"
+        if recorded is not None:  # an rl_zoo3 run's was checked as args.yml's env
+            checked_env_id(recorded, record, "env_id")
         # Options saved by earlier versions (e.g. the shipped trigger's posture_target) read as now.
         self.env_options = translate_legacy_options(self.saved.get("env_options", {}))
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
@@ -269,15 +376,62 @@ class PolicyActor:
             raise PolicyFileError(self.config_path, "flat_observation is set but observation_keys (the flattening "
                                                     "order) is missing; retrain, or add the keys of the env's "
                                                     "observation space")
-        spec = zoo_run.policy_spec(self.saved) if zoo_run is not None else None
-        self.model = load_model(path, algo or self.saved.get("algo"), spec)
+        algo = algo or self.saved.get("algo")
+        if zoo_run is not None:
+            spec = zoo_run.policy_spec(self.saved)
+            self.env_id = chosen_env_id(env_id, recorded, record)
+        else:
+            model_zip = read_model_zip(path)
+            spec = model_zip.spec
+            if recorded is None and spec is not None and spec.env_id is not None:
+                recorded, record = spec.env_id, path
+            self.env_id = chosen_env_id(env_id, recorded, record)
+            if self.env_id is None or (spec is None and self.config_path is None):
+                spec = self._matched_spec(model_zip, algo)
+        self.model = load_model(path, algo, spec)
         stats = observation_stats_path(path)
-        self.obs_stats = (ObservationStats.load(stats) if stats is not None
-                          else read_vecnormalize(zoo_run.stats_path) if zoo_run is not None and self.saved["normalize"]
-                          else None)
-        if self.obs_stats is None and self.saved.get("normalize"):
+        if stats is not None:
+            self.obs_stats = ObservationStats.load(stats)
+        elif zoo_run is not None and self.saved["normalize"]:
+            stats, self.obs_stats = zoo_run.stats_path, read_vecnormalize(zoo_run.stats_path)
+        else:
+            self.obs_stats = None
+        if self.obs_stats is not None:
+            self.obs_stats.check_usable(stats, self.model.observation_space)
+        elif self.saved.get("normalize"):
             raise PolicyFileError(path, f"was trained on normalised observations, but no {OBS_STATS_FILE} "
                                         "(or its checkpoint's) lies beside it")
+
+    def _matched_spec(self, model_zip: ModelZip, algo: str | None) -> PolicySpec:
+        """The policy of a model whose env no record names, or that holds no description of its
+        policy, and :attr:`env_id` set to its env: the registered env (:attr:`env_id` when
+        given) whose spaces are the model's (its description's, else those its SB3 ``data``
+        gives in readable text beside their pickles). Without a description, the policy is built
+        for those spaces: ``MultiInputPolicy`` for a dict observation, else ``MlpPolicy``; of
+        ``algo`` or else the algorithm whose policy class the data names; its ``policy_kwargs``
+        the data's own, which must be plain JSON (:func:`_trusted_entries`)."""
+        import gymnasium as gym
+
+        spec, data = model_zip.spec, model_zip.data
+        if spec is not None:
+            signatures = (space_signature(spec.observation_space), space_signature(spec.action_space))
+        else:
+            signatures = (described_space_signature(data.get("observation_space")),
+                          described_space_signature(data.get("action_space")))
+            if None in signatures:
+                raise PolicyFileError(self.path, "its data describes no Box or Dict observation space and Box action "
+                                                 "space (in the text SB3 writes beside their pickles)")
+        match = match_env(self.path, signatures, (self.env_id,) if self.env_id else package_env_ids())
+        self.env_id = match.env_id
+        self.observation_keys = self.observation_keys or match.observation_keys
+        if spec is not None:
+            return spec
+        algo = algo or described_algo(data)
+        if algo is None:
+            raise PolicyFileError(self.path, "its data names the policy class of neither PPO nor SAC "
+                                             "(policy_class.__module__); give the algorithm")
+        policy = "MultiInputPolicy" if isinstance(match.observation_space, gym.spaces.Dict) else "MlpPolicy"
+        return PolicySpec(algo, policy, match.observation_space, match.action_space, env_id=match.env_id)
 
     def make_env(self, **kwargs: Any) -> Any:
         """The env this policy runs in: its env id and options, inside the residual wrapper it

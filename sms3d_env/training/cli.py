@@ -22,6 +22,7 @@ from sms3d_env.training.config import (
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
 from sms3d_env.training.imitation import TEACHERS
 from sms3d_env.training.model_files import PolicyFileError
+from sms3d_env.training.policy_spec import package_env_ids
 from sms3d_env.training.recipes import ARTICLES, field_names
 from sms3d_env.training.recipes import KINDS as RECIPE_KINDS
 from sms3d_env.training.rl import InitModelError, train_policy
@@ -152,13 +153,16 @@ def _cmd_train(args: Any) -> int:
     if recipe.kind != "bc":
         return _summary_or_refusal(lambda: train_policy(recipe.config, overwrite=args.overwrite))
     from sms3d_env.training.demonstrations import DatasetError
-    from sms3d_env.training.imitation import train_bc
+    from sms3d_env.training.imitation import NonFiniteLossError, train_bc
 
     try:
         return _summary_or_refusal(lambda: train_bc(recipe.config, overwrite=args.overwrite))
     except (DatasetError, ImportError) as e:  # a --demos dataset it cannot use; Minari missing
         print(f"error: {e}")
         return 2
+    except NonFiniteLossError as e:  # the training diverged; the run is left unfinished
+        print(f"error: {e}")
+        return 1
 
 
 #: ``sms3d train-trigger`` flags: flag dest → ``TriggerConfig`` field.
@@ -200,7 +204,7 @@ def _cmd_eval(args: Any) -> int:
     try:
         res = evaluate_policy_success(args.model, episodes=args.episodes, pose_error_deg=args.pose_error_deg,
                                       seed=args.seed, num_mushrooms=args.num_mushrooms, progress=True,
-                                      video_dir=args.video, video_size=tuple(args.video_size))
+                                      video_dir=args.video, video_size=tuple(args.video_size), env_id=args.env_id)
     except ConfigError as e:  # an argument, named by its flag
         print(f"error: argument --{e.field.replace('_', '-')}: {e.message}")
         return 2
@@ -324,6 +328,9 @@ def register(subparsers: Any) -> None:
     e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "
                                                   "(default: the shipped one)")
     e.add_argument("--model", default=None, help="path to model.zip (default: the shipped policy)")
+    e.add_argument("--env-id", choices=package_env_ids(), default=None,
+                   help="the env the model was trained on, where its files do not say it (a model saved by "
+                        "SB3's own save; default: the one env whose spaces are the model's)")
     e.add_argument("--episodes", "--eval-episodes", dest="episodes", type=int, default=30)
     e.add_argument("--pose-error-deg", type=float, default=0.0, help="0: oracle poses")
     e.add_argument("--seed", type=int, default=1_000_000, help="first episode seed")

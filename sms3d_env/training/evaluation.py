@@ -24,7 +24,7 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
                             max_episode_steps: int | None = None, algo: str | None = None,
                             deterministic: bool = True, progress: bool = False,
                             video_dir: str | Path | None = None,
-                            video_size: tuple[int, int] = (480, 640)) -> dict[str, Any]:
+                            video_size: tuple[int, int] = (480, 640), env_id: str | None = None) -> dict[str, Any]:
     """Success of a saved policy over seeded episodes with oracle (0 deg) or noisy target poses.
 
     ``model_path`` None: the shipped policy. The env is the id and options the policy was trained
@@ -32,6 +32,10 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
     single bed size it was trained on, else 25, the registered env's — so the shipped policy,
     trained on 10 and 25, is evaluated on 25). Episode ``i`` uses ``reset(seed=seed + i)``, so the scenes are the same for
     every model and pose error.
+
+    ``env_id``: the env to run it in when its files do not say (a model SB3's own ``save`` wrote
+    whose spaces fit several registered envs); one they name must be that
+    (:class:`~sms3d_env.training.actor.PolicyActor`).
 
     ``video_dir``: also write every episode as ``episode_<seed>.mp4`` there (rendered from the
     env's ``pick`` camera at ``video_size``, (height, width) pixels, both even; annotated by
@@ -63,14 +67,14 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
             raise ConfigError("video_size", f"must be two even integers >= 16 (height, width; H.264 halves "
                                             f"the colour resolution), got {video_size!r}")
         video_dir = _video_folder(video_dir)
-    actor = PolicyActor(SHIPPED_POLICY if model_path is None else model_path, algo, deterministic)
+    actor = PolicyActor(SHIPPED_POLICY if model_path is None else model_path, algo, deterministic, env_id)
     trained_on = actor.saved.get("num_mushrooms")
     num_mushrooms = num_mushrooms or (trained_on if isinstance(trained_on, int) else 25)
     kw = env_kwargs(num_mushrooms, "noisy" if pose_error_deg > 0 else "oracle", pose_error_deg,
                     0.0, actor.saved.get("reward_type", "dense"),
                     max_episode_steps or actor.saved.get("max_episode_steps", 250))
-    if actor.env_id in TRAIN_ENV_IDS:
-        kw.pop("reward_type")
+    if actor.env_id in TRAIN_ENV_IDS or "reward_type" not in actor.saved:
+        kw.pop("reward_type")  # the env id's own reward (SMS3DPickSparse-v0's is sparse)
     from sms3d_env.training.threads import torch_threads
 
     with torch_threads(1):  # per-step inference of a small MLP: more threads only add overhead

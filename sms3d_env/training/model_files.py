@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,24 @@ import numpy as np
 from generator.files import write_via_temp
 from sms3d_env.training.config import ALGOS
 from sms3d_env.training.policy_spec import PolicySpec, algorithm_class
+from sms3d_env.training.quoting import clipped, described_error
+
+#: The most bytes a loader inflates from one member of a model zip: its weights (``.pth``; the
+#: shipped policies' are 0.1 MB, a 2x1024 MLP's with its optimiser state ~50 MB) and any other
+#: member (``data``, :data:`POLICY_SPEC_MEMBER`: kilobytes). Checked on each member's declared
+#: size before it is read: a few megabytes of zip can declare gigabytes.
+MAX_WEIGHTS_BYTES = 512 * 2**20
+MAX_METADATA_BYTES = 16 * 2**20
+#: The most bytes all members of a model zip inflate to together (SB3 reads every ``.pth``), and
+#: the most a model file may be on disk.
+MAX_MODEL_BYTES = 1024 * 2**20
+#: The most bytes of a run's text file read (``config.json``, an RL Zoo run's ``args.yml`` and
+#: ``config.yml``, ``summary.json``; these are kilobytes) and of observation statistics
+#: (``obs_rms.npz``, an RL Zoo run's ``vecnormalize.pkl``).
+MAX_RUN_FILE_BYTES = 1 * 2**20
+MAX_STATS_BYTES = MAX_METADATA_BYTES
+#: The most bytes of a ``.npy`` header in an ``.npz`` member (numpy writes 128 for these arrays).
+NPY_HEADER_BYTES = 4096
 
 #: The observation statistics beside a normalised run's ``model.zip`` (and ``best/best_model.zip``).
 OBS_STATS_FILE = "obs_rms.npz"
@@ -48,6 +67,53 @@ class PolicyFileError(ValueError):
 
     def __reduce__(self):  # picklable across the study's worker processes
         return (type(self), (self.path, self.message))
+
+
+def check_file_size(path: Path, limit: int, what: str) -> None:
+    """``PolicyFileError`` naming ``path`` when it is larger than ``limit`` bytes (before it is read)."""
+    size = path.stat().st_size
+    if size > limit:
+        raise PolicyFileError(path, f"{size} bytes, more than any {what} ({limit} bytes at most)")
+
+
+def read_run_text(path: Path, what: str) -> str:
+    """A run's small text file (at most :data:`MAX_RUN_FILE_BYTES`); ``PolicyFileError`` naming it
+    when it is larger, unreadable or not UTF-8."""
+    try:
+        check_file_size(path, MAX_RUN_FILE_BYTES, what)
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PolicyFileError(path, f"not a readable {what} ({described_error(exc)})") from None
+
+
+def parse_json(text: str | bytes, path: Path, what: str) -> Any:
+    """``text`` as JSON; ``PolicyFileError`` naming ``path`` and ``what`` when it is not JSON,
+    not UTF-8, or nested deeper than Python's recursion limit."""
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
+        raise PolicyFileError(path, f"{what} is not readable JSON ({described_error(exc)})") from None
+
+
+def check_zip_sizes(path: Path, archive: zipfile.ZipFile, member_limit: Any, total_limit: int) -> None:
+    """``PolicyFileError`` naming ``path`` and the member when a member of ``archive`` declares
+    more than ``member_limit(name)`` inflated bytes, or all together more than ``total_limit``.
+    Reading a member inflates at most its declared size (``zipfile`` stops there), so checking
+    the declarations bounds what reading the archive takes."""
+    total = 0
+    for info in archive.infolist():
+        limit = member_limit(info.filename)
+        if info.file_size > limit:
+            raise PolicyFileError(path, f"member {clipped(repr(info.filename))} inflates to {info.file_size} bytes, "
+                                        f"more than any such member ({limit} bytes at most)")
+        total += info.file_size
+    if total > total_limit:
+        raise PolicyFileError(path, f"its members inflate to {total} bytes, more than {total_limit} in all")
+
+
+def model_member_limit(name: str) -> int:
+    """The most bytes a model zip's member ``name`` may inflate to (:data:`MAX_WEIGHTS_BYTES` for weights)."""
+    return MAX_WEIGHTS_BYTES if name.endswith(".pth") else MAX_METADATA_BYTES
 
 
 def save_model(model: Any, path: str | Path) -> None:
@@ -75,10 +141,11 @@ def read_policy_spec(archive: zipfile.ZipFile) -> PolicySpec | None:
     if POLICY_SPEC_MEMBER not in archive.namelist():
         return None
     try:
-        data = json.loads(archive.read(POLICY_SPEC_MEMBER).decode("utf-8"))
+        return PolicySpec.from_json(json.loads(archive.read(POLICY_SPEC_MEMBER)))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"not JSON ({exc})") from None
-    return PolicySpec.from_json(data)
+        raise ValueError(f"not JSON ({described_error(exc)})") from None
+    except RecursionError:  # json.loads or a space nested in spaces
+        raise ValueError("nested deeper than Python's recursion limit") from None
 
 
 def record_policy_spec(path: str | Path, algo: str | None = None) -> None:
@@ -136,8 +203,14 @@ def load_replay_buffer(buffer: Any, path: str | Path) -> None:
     """Fill ``buffer`` (the run's own, as its model built it) with what :func:`save_replay_buffer`
     wrote, unpickling nothing; ``PolicyFileError`` naming the file when it is missing, cut or of
     another buffer (other arrays, shapes or dtypes)."""
+    path = Path(path)
     targets = _replay_arrays(buffer)
+    # Each array's member may hold its bytes and a .npy header, no more (pos and full: a header and 8 bytes).
+    limits = {f"{name}.npy": target.nbytes + NPY_HEADER_BYTES for name, target in targets.items()}
     try:
+        with zipfile.ZipFile(path) as archive:
+            check_zip_sizes(path, archive, lambda name: limits.get(name, NPY_HEADER_BYTES + 8),
+                            sum(limits.values()) + 2 * (NPY_HEADER_BYTES + 8))
         with np.load(path, allow_pickle=False) as z:
             if set(z.files) != {*targets, "pos", "full"}:
                 raise ValueError(f"arrays {sorted(z.files)}, expected {sorted({*targets, 'pos', 'full'})}")
@@ -148,8 +221,10 @@ def load_replay_buffer(buffer: Any, path: str | Path) -> None:
                                      f"{target.shape}")
                 target[...] = saved
             pos, full = int(z["pos"]), bool(z["full"])
+    except PolicyFileError:
+        raise
     except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
-        raise PolicyFileError(path, f"not this run's replay buffer ({type(exc).__name__}: {exc})") from None
+        raise PolicyFileError(path, f"not this run's replay buffer ({described_error(exc)})") from None
     if not 0 <= pos < buffer.buffer_size:
         raise PolicyFileError(path, f"write position {pos} outside the buffer's {buffer.buffer_size} rows")
     buffer.pos, buffer.full = pos, full
@@ -224,9 +299,13 @@ class ObservationStats:
     def load(cls, path: str | Path) -> ObservationStats:
         """Read what :meth:`save` wrote, without unpickling anything (``PolicyFileError`` naming
         the file when it is missing, cut or not such a file)."""
+        path = Path(path)
         try:
+            check_file_size(path, MAX_STATS_BYTES, "observation statistics")
+            with zipfile.ZipFile(path) as archive:
+                check_zip_sizes(path, archive, lambda _name: MAX_STATS_BYTES, MAX_STATS_BYTES)
             with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
+                meta = parse_json(str(z["meta"]), path, "meta")
                 if meta.get("format") != _FORMAT:
                     raise ValueError(f"format {meta.get('format')!r}, expected {_FORMAT}")
                 keys = meta["keys"]
@@ -236,12 +315,38 @@ class ObservationStats:
                            if "ret_mean" in z.files else None)
                 return cls(obs, float(meta["clip_obs"]), float(meta["epsilon"]), bool(meta["norm_reward"]),
                            returns, float(meta["clip_reward"]), float(meta["gamma"]))
+        except PolicyFileError:
+            raise
         except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
-            raise PolicyFileError(path, f"not readable observation statistics ({type(exc).__name__}: {exc})") from None
+            raise PolicyFileError(path, f"not readable observation statistics ({described_error(exc)})") from None
+
+    def check_usable(self, path: str | Path, space: Any) -> None:
+        """``PolicyFileError`` naming ``path`` (where these were read) when they cannot normalise
+        the observation ``space`` of the policy: statistics of keys or shapes it lacks, a mean or
+        variance not finite, a variance below 0 or, with ``epsilon``, 0 (a division by zero), a
+        clip or epsilon that is no finite number > 0 (>= 0 for epsilon). Caught here, such
+        statistics would otherwise make every action NaN without naming the file."""
+        shapes = {k: s.shape for k, s in space.spaces.items()} if hasattr(space, "spaces") else {None: space.shape}
+        for key, r in self.obs.items():
+            where = "observation" if key is None else f"obs[{clipped(repr(key))}]"
+            if key not in shapes or r.mean.shape != shapes[key] or r.var.shape != shapes[key]:
+                raise PolicyFileError(path, f"{where}: statistics of shape {r.mean.shape}/{r.var.shape} for a policy "
+                                            f"whose observation is {_shapes_text(shapes)}")
+            if not (np.all(np.isfinite(r.mean)) and np.all(np.isfinite(r.var)) and math.isfinite(r.count)):
+                raise PolicyFileError(path, f"{where}: mean, variance or count not finite")
+            if np.any(r.var < 0) or np.any(r.var + self.epsilon <= 0):
+                raise PolicyFileError(path, f"{where}: a variance below 0, or 0 with epsilon 0 (a division by zero)")
+        if not (math.isfinite(self.epsilon) and self.epsilon >= 0 and math.isfinite(self.clip_obs) and self.clip_obs > 0):
+            raise PolicyFileError(path, f"clip_obs {self.clip_obs} and epsilon {self.epsilon}: must be finite, "
+                                        "clip_obs > 0 and epsilon >= 0")
 
 
 def _copy(r: Any) -> RunningStats:
     return RunningStats(np.array(r.mean, np.float64), np.array(r.var, np.float64), float(r.count))
+
+
+def _shapes_text(shapes: dict[str | None, tuple[int, ...]]) -> str:
+    return ", ".join(f"{'one array' if k is None else k} {shape}" for k, shape in shapes.items())
 
 
 def _layout(rms: dict[str | None, Any]) -> str:
@@ -262,11 +367,11 @@ def finished_run(folder: Path, **expected: Any) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        summary = json.loads(path.read_text(encoding="utf-8"))
+        summary = parse_json(read_run_text(path, "run summary"), path, "the run summary")
         if not isinstance(summary, dict):
-            raise ValueError("not a JSON object")
-    except (OSError, ValueError) as exc:
-        raise PolicyFileError(path, f"unreadable run summary ({exc}); --overwrite to start the run anew") from None
+            raise PolicyFileError(path, "not a JSON object")
+    except PolicyFileError as exc:
+        raise PolicyFileError(path, f"unreadable run summary ({exc.message}); --overwrite to start the run anew") from None
     if any(summary.get(k) != v for k, v in expected.items()):
         return None
     print(f"{folder} is complete ({path.name}); nothing to do (--overwrite to start it anew)")

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from sms3d_env.training.config import ALGOS
+from sms3d_env.training.quoting import clipped
 
 #: The SB3 policies a saved model may use (SB3's names, for PPO and for SAC alike): the dict
 #: observation's and the flattened observation's.
@@ -39,6 +40,58 @@ def policy_kwarg_classes() -> dict[str, type]:
     from sms3d_env.training.policy_features import NormalizedFlatten
 
     return {qualified_name(c): c for c in (NormalizedFlatten,)}
+
+
+def package_env_ids() -> tuple[str, ...]:
+    """The env ids this package registers (``sms3d_env/__init__.py``): the only ones a saved
+    policy may name. An id read from a file goes nowhere else, since ``gym.make`` reads
+    ``"module:Env"`` as "import module first": the file would choose what is imported."""
+    from gymnasium.envs.registration import registry
+
+    import sms3d_env  # noqa: F401  (registers the ids)
+
+    return tuple(env_id for env_id, spec in registry.items()
+                 if isinstance(spec.entry_point, str) and spec.entry_point.startswith("sms3d_env.pick_env:"))
+
+
+#: SB3's ``data`` entry of a pickled space: ``:type:`` as SB3 writes it, by the kind of space.
+PICKLED_SPACE_TYPES = {"<class 'gymnasium.spaces.dict.Dict'>": "Dict", "<class 'gymnasium.spaces.box.Box'>": "Box"}
+#: The module of the policy class of a PPO and of a SAC model (``data["policy_class"]["__module__"]``).
+POLICY_MODULES = {"stable_baselines3.common.policies": "ppo", "stable_baselines3.sac.policies": "sac"}
+
+
+def space_signature(space: Any) -> tuple[Any, ...] | None:
+    """What SB3's ``data`` says in readable text of a ``Box`` or a ``Dict`` of them beside its
+    pickle (:func:`described_space_signature`), as the space itself gives it; ``None`` for others."""
+    import gymnasium as gym
+
+    if isinstance(space, gym.spaces.Dict):
+        return ("Dict", str(space.spaces))
+    if isinstance(space, gym.spaces.Box):
+        return ("Box", str(space.dtype), tuple(space.shape), str(space.low), str(space.high))
+    return None
+
+
+def described_space_signature(entry: Any) -> tuple[Any, ...] | None:
+    """The :func:`space_signature` of the space pickled in an SB3 ``data`` entry, from the text
+    SB3 writes beside the pickle (a ``Dict``'s ``spaces`` as ``str``; a ``Box``'s dtype, shape and
+    bounds), nothing unpickled; ``None`` when the entry is no such description."""
+    if not isinstance(entry, dict):
+        return None
+    kind = PICKLED_SPACE_TYPES.get(entry.get(":type:"))
+    if kind == "Dict" and isinstance(entry.get("spaces"), str):
+        return ("Dict", entry["spaces"])
+    shape = entry.get("_shape")
+    if kind == "Box" and isinstance(shape, list) and all(isinstance(n, int) for n in shape):
+        return ("Box", entry.get("dtype"), tuple(shape), entry.get("low"), entry.get("high"))
+    return None
+
+
+def described_algo(data: dict[str, Any]) -> str | None:
+    """``"ppo"``/``"sac"`` as SB3's ``data`` names the module of its pickled policy class; ``None``
+    when it names another."""
+    entry = data.get("policy_class")
+    return POLICY_MODULES.get(entry.get("__module__")) if isinstance(entry, dict) else None
 
 
 def space_to_json(space: Any) -> dict[str, Any]:
@@ -134,6 +187,16 @@ def algorithm_class(algo: str) -> Any:
     return {"ppo": PPO, "sac": SAC}[algo]
 
 
+def _trained_env_id(model: Any) -> str | None:
+    """The package env id of the envs ``model`` trains in (``None`` without envs, or for another env)."""
+    venv = model.get_env()
+    try:
+        env_id = getattr(venv.get_attr("spec", [0])[0], "id", None) if venv is not None else None
+    except AttributeError:  # a VecEnv or env without a spec
+        return None
+    return env_id if env_id in package_env_ids() else None
+
+
 @dataclass(frozen=True)
 class PolicySpec:
     """What a saved model's policy is built from, instead of the entries SB3 pickled.
@@ -146,6 +209,7 @@ class PolicySpec:
         action_space: a ``Box``.
         policy_kwargs: the policy's keyword arguments in JSON form (classes by qualified name);
             ``None``: the model file's own, which must then be plain JSON in its ``data``.
+        env_id: the env it was trained on, one of :func:`package_env_ids`; ``None`` when not known.
     """
 
     algo: str
@@ -153,6 +217,7 @@ class PolicySpec:
     observation_space: Any
     action_space: Any
     policy_kwargs: dict[str, Any] | None = None
+    env_id: str | None = None
 
     def __post_init__(self) -> None:
         import gymnasium as gym
@@ -167,6 +232,8 @@ class PolicySpec:
                              f"{type(self.observation_space).__name__}")
         if not isinstance(self.action_space, gym.spaces.Box):
             raise ValueError(f"action_space: must be a Box, got {type(self.action_space).__name__}")
+        if self.env_id is not None and self.env_id not in package_env_ids():
+            raise ValueError(f"env_id: {clipped(repr(self.env_id))} is none of this package's env ids ({', '.join(package_env_ids())})")
 
     @classmethod
     def of(cls, model: Any) -> PolicySpec:
@@ -179,7 +246,7 @@ class PolicySpec:
         if policy is None:
             raise ValueError(f"policy class {qualified_name(model.policy_class)}: a saved policy is one of {POLICIES}")
         return cls(algo, policy, model.observation_space, model.action_space,
-                   policy_kwargs_to_json(model.policy_kwargs))
+                   policy_kwargs_to_json(model.policy_kwargs), _trained_env_id(model))
 
     def to_json(self) -> dict[str, Any]:
         """The spec as JSON data (what :data:`~sms3d_env.training.model_files.POLICY_SPEC_MEMBER` holds)."""
@@ -187,7 +254,8 @@ class PolicySpec:
             raise ValueError("policy_kwargs: a spec written to a file must hold them")
         return {"format": SPEC_FORMAT, "algo": self.algo, "policy": self.policy,
                 "observation_space": space_to_json(self.observation_space),
-                "action_space": space_to_json(self.action_space), "policy_kwargs": self.policy_kwargs}
+                "action_space": space_to_json(self.action_space), "policy_kwargs": self.policy_kwargs,
+                **({} if self.env_id is None else {"env_id": self.env_id})}
 
     @classmethod
     def from_json(cls, data: Any) -> PolicySpec:
@@ -200,7 +268,7 @@ class PolicySpec:
             raise ValueError(f"policy_kwargs: must be a mapping, got {type(kwargs).__name__}")
         return cls(data.get("algo"), data.get("policy"),
                    space_from_json(data.get("observation_space"), "observation_space"),
-                   space_from_json(data.get("action_space"), "action_space"), kwargs)
+                   space_from_json(data.get("action_space"), "action_space"), kwargs, data.get("env_id"))
 
     def policy_class(self) -> type:
         """SB3's class of :attr:`policy` for :attr:`algo`."""

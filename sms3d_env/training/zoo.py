@@ -29,8 +29,17 @@ import numpy as np
 
 from generator.config_file import read_exponent_floats, shipped_or_file
 from sms3d_env.env_args import translate_legacy_options
-from sms3d_env.training.model_files import ObservationStats, PolicyFileError, RunningStats
+from sms3d_env.training.model_files import (
+    MAX_STATS_BYTES,
+    ObservationStats,
+    PolicyFileError,
+    RunningStats,
+    check_file_size,
+    read_run_text,
+)
 from sms3d_env.training.policy_spec import PolicySpec
+from sms3d_env.training.quoting import described_error
+from sms3d_env.training.trained_env import checked_env_id, env_spaces
 
 #: The shipped recipes: ``sms3d_env/recipes/<name>.yml``.
 RECIPES_DIR = Path(__file__).parents[1] / "recipes"
@@ -64,15 +73,44 @@ def recipe_path(name_or_path: str | Path) -> Path:
 ORDERED_DICT_TAG = "tag:yaml.org,2002:python/object/apply:collections.OrderedDict"
 
 
+#: The most nodes an RL Zoo YAML file may expand to, each alias counted as what it repeats (a
+#: recipe or an RL Zoo run's ``config.yml``/``args.yml`` has a few hundred): nested aliases of a
+#: small file otherwise expand to gigabytes wherever the value is used or quoted.
+MAX_YAML_NODES = 10_000
+
+
+def _expands_within(root: Any, limit: int) -> bool:
+    """Whether the YAML node ``root``, its aliases expanded, has at most ``limit`` nodes (counted
+    without expanding more than ``limit``: a file's aliases may nest or refer to themselves)."""
+    import yaml
+
+    stack, seen = [root], 0
+    while stack:
+        node = stack.pop()
+        seen += 1
+        if seen > limit:
+            return False
+        if isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+        elif isinstance(node, yaml.MappingNode):
+            stack.extend(n for pair in node.value for n in pair)
+    return True
+
+
 def _safe_zoo_yaml(text: str) -> Any:
     """YAML as ``yaml.safe_load`` reads it, plus :data:`ORDERED_DICT_TAG` read as a plain mapping
     (its ``[[key, value], ...]`` argument) and exponent-notation numbers read as floats (a run's
     ``config.json`` writes rates so; :data:`generator.config_file.EXPONENT_FLOAT`); any other
-    Python tag stays refused."""
+    Python tag stays refused. ``ValueError`` saying why for a document that expands past
+    :data:`MAX_YAML_NODES` or nests deeper than Python's recursion limit."""
     import yaml
 
     class Loader(yaml.SafeLoader):
-        pass
+        def construct_document(self, node: Any) -> Any:
+            if not _expands_within(node, MAX_YAML_NODES):
+                raise ValueError(f"expands to more than {MAX_YAML_NODES} values (aliases counted as what they "
+                                 "repeat)")
+            return super().construct_document(node)
 
     read_exponent_floats(Loader)
 
@@ -81,20 +119,43 @@ def _safe_zoo_yaml(text: str) -> Any:
         return dict(pairs)
 
     Loader.add_constructor(ORDERED_DICT_TAG, ordered_dict)
-    return yaml.load(text, Loader=Loader)  # noqa: S506  (a SafeLoader with one data-only constructor)
+    try:
+        return yaml.load(text, Loader=Loader)  # noqa: S506  (a SafeLoader with one data-only constructor)
+    except RecursionError:
+        raise ValueError("nested deeper than Python's recursion limit") from None
+
+
+def _zoo_yaml_or_why(path: Path) -> tuple[dict[str, Any] | None, str]:
+    """An RL Zoo YAML file as a mapping and ``""``, or ``None`` and why it is not one (larger than
+    :data:`~sms3d_env.training.model_files.MAX_RUN_FILE_BYTES`, unreadable, not YAML of a mapping)."""
+    import yaml
+
+    try:
+        data = _safe_zoo_yaml(read_run_text(Path(path), "RL Zoo YAML file"))
+    except PolicyFileError as exc:
+        return None, exc.message
+    except (yaml.YAMLError, TypeError, ValueError) as exc:
+        return None, f"not readable RL Zoo YAML ({described_error(exc)})"
+    if not isinstance(data, dict):
+        return None, "not a mapping of settings"
+    return data, ""
 
 
 def read_zoo_yaml(path: Path) -> dict[str, Any]:
     """An RL Zoo YAML file (a recipe, ``config.yml``, ``args.yml``) as a mapping; ``RecipeError``
-    naming the file when it is not readable YAML of a mapping."""
-    import yaml
+    naming the file when it is not readable YAML of a mapping (:func:`_zoo_yaml_or_why`)."""
+    data, why = _zoo_yaml_or_why(path)
+    if data is None:
+        raise RecipeError(f"{path}: {why}")
+    return data
 
-    try:
-        data = _safe_zoo_yaml(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, ValueError) as exc:
-        raise RecipeError(f"{path}: not readable RL Zoo YAML ({exc})") from None
-    if not isinstance(data, dict):
-        raise RecipeError(f"{path}: not a mapping of settings")
+
+def read_run_yaml(path: Path) -> dict[str, Any]:
+    """An RL Zoo run's ``args.yml`` or ``config.yml`` as a mapping; ``PolicyFileError`` naming
+    the file when it is not readable YAML of a mapping (:func:`_zoo_yaml_or_why`)."""
+    data, why = _zoo_yaml_or_why(path)
+    if data is None:
+        raise PolicyFileError(path, why)
     return data
 
 
@@ -260,11 +321,27 @@ class _Inert:
 
     global_name = ""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    # __new__, not __init__: pickle's NEWOBJ makes an object by its class's __new__ alone.
+    def __new__(cls, *args: Any, **kwargs: Any) -> _Inert:
+        self = super().__new__(cls)
         self.args, self.kwargs, self.state = args, kwargs, None
+        self.items: dict[Any, Any] = {}
+        self.elements: list[Any] = []
+        return self
 
     def __setstate__(self, state: Any) -> None:
         self.state = state
+
+    # A pickled container (an OrderedDict, a gymnasium Dict space's mapping) gets its items so;
+    # kept as data like the rest.
+    def __setitem__(self, key: Any, value: Any) -> None:
+        self.items[key] = value
+
+    def append(self, value: Any) -> None:
+        self.elements.append(value)
+
+    def extend(self, values: Any) -> None:
+        self.elements.extend(values)
 
 
 def _array_globals() -> dict[tuple[str, str], Any]:
@@ -310,10 +387,13 @@ def read_vecnormalize(path: str | Path) -> ObservationStats | None:
     is not a pickled ``VecNormalize``."""
     path = Path(path)
     try:
+        check_file_size(path, MAX_STATS_BYTES, "VecNormalize statistics")
         root = _RestrictedUnpickler(io.BytesIO(path.read_bytes())).load()
+    except PolicyFileError:
+        raise
     except (OSError, pickle.UnpicklingError, EOFError, ValueError, TypeError, AttributeError, IndexError,
             KeyError) as exc:
-        raise PolicyFileError(path, f"not readable VecNormalize statistics ({type(exc).__name__}: {exc})") from None
+        raise PolicyFileError(path, f"not readable VecNormalize statistics ({described_error(exc)})") from None
     state = getattr(root, "state", None)
     if getattr(root, "global_name", "") != "stable_baselines3.common.vec_env.vec_normalize.VecNormalize" \
             or not isinstance(state, dict):
@@ -345,10 +425,11 @@ class ZooRun:
         ``env_options`` (the env keyword arguments a policy must run with), ``num_mushrooms``,
         ``normalize``, ``flat_observation`` and ``observation_keys`` (``PolicyFileError`` naming
         a file that does not say them, or a wrapper other than ``FlattenObservation``)."""
-        args, hyper = (read_zoo_yaml(self.params / name) for name in ("args.yml", "config.yml"))
+        args, hyper = (read_run_yaml(self.params / name) for name in ("args.yml", "config.yml"))
         env_id, algo = args.get("env"), args.get("algo")
-        if not isinstance(env_id, str) or not isinstance(algo, str):
+        if env_id is None or not isinstance(algo, str):
             raise PolicyFileError(self.params / "args.yml", "names no env and algo: not an rl_zoo3 run's")
+        checked_env_id(env_id, self.params / "args.yml", "env")
         wrappers = hyper.get("env_wrapper") or []
         wrappers = wrappers if isinstance(wrappers, list) else [wrappers]
         if any(w != FLATTEN_WRAPPER for w in wrappers):
@@ -364,7 +445,7 @@ class ZooRun:
         if isinstance(placement.get("num_mushrooms"), int):
             saved["num_mushrooms"] = placement["num_mushrooms"]
         if wrappers:
-            saved["observation_keys"] = list(_env_spaces(env_id, saved["env_options"])[0].spaces)
+            saved["observation_keys"] = list(env_spaces(env_id, saved["env_options"])[0].spaces)
         return saved
 
     def policy_spec(self, saved: dict[str, Any]) -> PolicySpec:
@@ -376,25 +457,13 @@ class ZooRun:
         import gymnasium as gym
 
         config = self.params / "config.yml"
-        observation, action = _env_spaces(saved["env_id"], saved["env_options"])
+        observation, action = env_spaces(saved["env_id"], saved["env_options"])
         if saved["flat_observation"]:
             observation = gym.spaces.flatten_space(observation)
         try:
-            return PolicySpec(saved["algo"], read_zoo_yaml(config).get("policy"), observation, action)
+            return PolicySpec(saved["algo"], read_run_yaml(config).get("policy"), observation, action)
         except ValueError as exc:
             raise PolicyFileError(config, f"not a policy this package loads ({exc})") from None
-
-
-def _env_spaces(env_id: str, env_options: dict[str, Any]) -> tuple[Any, Any]:
-    """``env_id``'s observation space (a ``Dict``, keys in the order ``FlattenObservation``
-    concatenates them) and action space."""
-    from sms3d_env.training.envs import make_env
-
-    env = make_env(env_id, **env_options)
-    try:
-        return env.observation_space, env.action_space
-    finally:
-        env.close()
 
 
 def zoo_run_of(model_path: str | Path) -> ZooRun | None:
