@@ -26,6 +26,7 @@ class EpisodeState:
     target_detached: bool = False
     grip_lost: bool = False
     bruised: set[int] = field(default_factory=set)
+    slip_work: dict[int, float] = field(default_factory=dict)  # friction work slipping on each cap (J)
     detached: set[int] = field(default_factory=set)
     disturbed: set[int] = field(default_factory=set)
     unstable: bool = False

@@ -73,6 +73,14 @@ class PickPhysicsParams:
             force is ``holding_force (1 - exp(-t / evacuation_time))`` t seconds after sealing
             (with ``lip_seal``). ASSUMPTION: no source for a small cup's evacuation time (hose
             and ejector dependent); 50 ms, a short hose on a venturi ejector.
+        slip_bruising: a cap also bruises by slip-shear, the documented mechanism (Burton 2004:
+            slip-shear of the surface hyphae, then browning): when the friction work done on it
+            by contacts slipping over its surface (a cup sliding before it seals, a lifted cap
+            scraping a neighbour) reaches ``slip_bruise_work``. False: bruising by pressure
+            alone (``bruise_force``; v0, v1).
+        slip_bruise_work: friction work (J) slipping on one cap that bruises it. ASSUMPTION: no
+            numeric slip-shear threshold is published (Burton's bruisometer measures it, values
+            not stored); 5 mJ is 1 N of friction dragged 5 mm across the cap.
         mushrooms_collide: every mushroom collides with every other, rooted or loose, so a lifted
             cap pushes, drags or scrapes its neighbours. The bed's collision hulls must not
             interpenetrate at rest (more than 1 mm): generated beds need
@@ -105,6 +113,8 @@ class PickPhysicsParams:
     evacuation_time: float = 0.05
     clean_pick: bool = False
     mushrooms_collide: bool = False
+    slip_bruising: bool = False
+    slip_bruise_work: float = 0.005
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():

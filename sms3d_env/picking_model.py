@@ -6,6 +6,7 @@ every physics substep (dm_control's ``after_substep``), apart from the gym API.
 | what the tool holds and when it lets go (suction: seal, grip weld, grip loss; hand: fingers) | the tool, :mod:`sms3d_env.tools` (``Tool`` protocol) | see each tool |
 | root detachment: the root weld's pull, bend and twist against their limits | ``_check_roots`` | ``physics.root_utilisation`` |
 | bruising: cap contact force above the threshold | ``_contacts`` | ``bruise_force`` |
+| bruising by slip-shear (``slip_bruising``): friction work slipping on a cap | ``_slip_shear`` | ``slip_bruise_work`` |
 | neighbours disturbed: moved further than the tolerance, or detached | ``after_step`` | ``disturb_tolerance`` |
 | soil contacts of detached mushrooms once their stem is out of the soil | ``after_step`` | ``physics.SOIL_CLEARANCE`` |
 | success: target detached, held, lifted, unbruised (with ``clean_pick``: no neighbour disturbed) | ``picked``, ``success`` | ``lift_height``, ``clean_pick`` |
@@ -62,6 +63,7 @@ class PickingModel:
         self.state = EpisodeState(target=target, reachable=reachable)
         self.tool: Tool = make_tool(world, params, self.state, latched)
         self._qfrc = np.zeros(world.model.nv)
+        self._vel6 = np.zeros(6)
         self.init_xpos = np.zeros((len(world.body_ids), 3))
         self.init_cap_top = np.zeros(3)
 
@@ -152,7 +154,35 @@ class PickingModel:
                     tool.on_contact(c, g, int(other), int(k), fn)
                 if w.is_cap[g] and fn > p.bruise_force:
                     ep.bruised.add(int(k))
+                if w.is_cap[g] and p.slip_bruising:
+                    self._slip_shear(int(c), int(k), f6)
         return touched
+
+    def _slip_shear(self, contact: int, k: int, f6: np.ndarray) -> None:
+        """Add one physics step's friction work slipping on cap ``k`` at ``contact`` (its force
+        ``f6`` in the contact frame): the friction force times the relative tangential speed of
+        the two surfaces there; a cap whose work reaches ``slip_bruise_work`` is bruised."""
+        w, ep = self.world, self.state
+        m, d = w.model, w.data
+        friction = float(np.hypot(f6[1], f6[2]))
+        if friction == 0.0:
+            return
+        point, frame = d.contact.pos[contact], d.contact.frame[contact].reshape(3, 3)
+        g1, g2 = d.contact.geom[contact]
+        relative = self._point_velocity(int(m.geom_bodyid[g1]), point) - self._point_velocity(int(m.geom_bodyid[g2]), point)
+        slip = relative - (relative @ frame[0]) * frame[0]
+        work = ep.slip_work.get(k, 0.0) + friction * float(np.linalg.norm(slip)) * m.opt.timestep
+        ep.slip_work[k] = work
+        if work >= self.params.slip_bruise_work:
+            ep.bruised.add(k)
+
+    def _point_velocity(self, body: int, point: np.ndarray) -> np.ndarray:
+        """World linear velocity of the point of ``body`` at ``point`` (zero on the world body)."""
+        if body == 0:
+            return np.zeros(3)
+        d = self.world.data
+        mujoco.mj_objectVelocity(self.world.model, d, mujoco.mjtObj.mjOBJ_BODY, body, self._vel6, 0)
+        return self._vel6[3:] + np.cross(self._vel6[:3], point - d.xpos[body])
 
     # ------------------------------------------------------------------ roots
     def _check_roots(self, ks: list[int]) -> None:

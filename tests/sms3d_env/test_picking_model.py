@@ -174,3 +174,28 @@ def test_a_clean_pick_episode_ends_when_the_target_is_picked_and_reports_the_nei
     assert results[False]["success"] and results[False]["neighbours_disturbed"] == 1
     assert not results[True]["success"] and results[True]["failure_cause"] == "neighbour_disturbed"
     assert results[True]["steps"] == results[False]["steps"]  # the same pick, judged as a grower would
+
+
+@pytest.mark.parametrize("slip_bruise_work, bruised", [(1e-6, True), (10.0, False)])
+def test_a_cap_scraped_by_a_sliding_neighbour_bruises_past_the_slip_shear_work(slip_bruise_work, bruised):
+    """A loose cap dropped and dragged across a rooted neighbour's cap does friction work on it;
+    past ``slip_bruise_work`` the neighbour is bruised (by slip-shear, not by pressure: the
+    contact stays far below ``bruise_force``)."""
+    bed = generator.SceneConfig().replace(placement__num_mushrooms=10, placement__overlap_iou=0.0)
+    physics = PickPhysicsParams(mushrooms_collide=True, slip_bruising=True, slip_bruise_work=slip_bruise_work)
+    env = gym.make("SMS3DPick-v1", scene=bed, physics=physics)
+    env.reset(seed=3)
+    base = env.unwrapped
+    w, picking = base.world, base.picking
+    m, d = w.model, w.data
+    i, j = 0, 1
+    d.eq_active[w.root_eq[j]] = 0
+    qadr, dadr = m.jnt_qposadr[m.body_jntadr[w.body_ids[j]]], w.dofadr[j]
+    d.qpos[qadr:qadr + 3] = d.site_xpos[w.cap_top_sites[i]] + [-0.02, 0.0, 0.02]
+    d.qvel[dadr:dadr + 3] = [0.3, 0.0, 0.0]  # sliding across i's cap
+    m.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    for _ in range(100):
+        mujoco.mj_step(m, d)
+        picking.after_substep()
+    assert picking.state.slip_work.get(i, 0.0) > 0.0
+    assert (i in picking.state.bruised) is bruised
