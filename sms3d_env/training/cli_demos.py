@@ -83,6 +83,7 @@ def _cmd_record(args: Any) -> int:
                              "wrapper, not the env's commands; record the scripted picker or a policy")
         from sms3d_env.training.demonstrations import (
             check_dataset_id,
+            check_not_namespace,
             check_recordable,
             dataset_path,
             datasets_root,
@@ -91,6 +92,7 @@ def _cmd_record(args: Any) -> int:
         )
 
         dataset_id = check_dataset_id(args.dataset_id)
+        check_not_namespace(dataset_id)  # --overwrite deletes one dataset, never a namespace of them
         if dataset_path(dataset_id).exists() and not args.overwrite:
             print(f"error: argument --dataset-id: a Minari dataset {dataset_id!r} exists in {datasets_root()} "
                   "(MINARI_DATASETS_PATH); choose another id or pass --overwrite")
@@ -127,7 +129,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--dataset-id", required=True, metavar="ID",
                    help="Minari's (namespace/)name-v<N>, e.g. sms3d/pick-v1/scripted-v0; written under "
                         "MINARI_DATASETS_PATH (default ~/.minari/datasets)")
-    p.add_argument("--overwrite", action="store_true", help="delete an existing dataset of that id first")
+    p.add_argument("--overwrite", action="store_true",
+                   help="delete an existing dataset of that id first (only that dataset: an id that names a "
+                        "namespace of other datasets is refused)")
     p.add_argument("--episodes", type=int, default=50, help="episodes to record (failures included)")
     p.add_argument("--seed", type=int, default=0, help="episode i resets with seed + i")
     p.add_argument("--picker", default="scripted",

@@ -36,6 +36,10 @@ source, the seeds, the DART noise and the ``sms3d-pick`` version.
 Minari is an optional dependency (``pip install "sms3d-pick[ecosystem]"``); it is imported when a
 dataset is recorded or read. It finds datasets under ``MINARI_DATASETS_PATH`` (default
 ``~/.minari/datasets``); :func:`minari_root` points it at another folder for a while.
+
+A recording caches its episodes in Minari's temporary folders until it writes the dataset; they
+live in ``.recording.tmp<pid>`` under the datasets folder, which the next recording there removes
+once that process is gone (a killed recording leaves no folder behind for long).
 """
 
 from __future__ import annotations
@@ -53,12 +57,17 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from generator.files import remove_orphaned_temporaries, temp_path
+
 #: The key of the dataset metadata that says what recorded it.
 RECORDING_KEY = "recording"
 #: The distribution whose version a dataset records, and the author Minari's metadata names.
 PACKAGE, PACKAGE_AUTHOR = "sms3d-pick", "SMS3D pick contributors"
 #: The action's twist entries, which DART noise perturbs (the seventh, the tool command, stays clean).
 TWIST_ENTRIES = 6
+#: The folder (named by :func:`generator.files.temp_path`, so with the recording's pid) under the
+#: datasets folder in which Minari's DataCollectors cache a recording's episodes.
+RECORDING_CACHE = ".recording"
 #: Observation entry ``suction[1]``: the vacuum sensor's seal flag (1 while a seal holds).
 _SEAL_FLAG = ("suction", 1)
 
@@ -78,8 +87,17 @@ def _minari() -> Any:
 
 
 def datasets_root() -> Path:
-    """Where Minari keeps datasets now: ``MINARI_DATASETS_PATH``, else ``~/.minari/datasets``."""
-    return Path(os.environ.get("MINARI_DATASETS_PATH") or Path.home() / ".minari" / "datasets")
+    """Where Minari keeps datasets now: ``MINARI_DATASETS_PATH``, else (unset)
+    ``~/.minari/datasets``. Minari takes a set but empty ``MINARI_DATASETS_PATH`` as set, not as
+    unset (it reads datasets from the current folder and fails to record), so an empty one is
+    refused (``DatasetError``) rather than read as the default, where Minari would not look."""
+    value = os.environ.get("MINARI_DATASETS_PATH")
+    if value is None:
+        return Path.home() / ".minari" / "datasets"
+    if not value.strip():
+        raise DatasetError("MINARI_DATASETS_PATH is set but empty; set it to a folder, or unset it for Minari's "
+                           "default ~/.minari/datasets")
+    return Path(value)
 
 
 @contextlib.contextmanager
@@ -102,21 +120,41 @@ def minari_root(folder: str | Path | None) -> Iterator[Path]:
 
 def check_dataset_id(dataset_id: str) -> str:
     """``dataset_id`` if Minari takes it (``namespace/name-vN``, e.g. ``sms3d/pick-v1/scripted-v0``);
-    ``ValueError`` naming it otherwise."""
-    parse_dataset_id = _minari().dataset.minari_dataset.parse_dataset_id
+    ``ValueError`` naming it otherwise (its namespace, when only that is what Minari refuses)."""
+    minari = _minari()
+    dataset_id = str(dataset_id)
     try:
-        _, _, version = parse_dataset_id(str(dataset_id))
+        _, _, version = minari.dataset.minari_dataset.parse_dataset_id(dataset_id)
     except (ValueError, TypeError):
         version = None
     if version is None:
+        namespace = dataset_id.rpartition("/")[0]
+        if namespace and not minari.namespace.NAMESPACE_REGEX.fullmatch(namespace):
+            raise ValueError(f"dataset_id {dataset_id!r}: Minari refuses the namespace {namespace!r}; a namespace "
+                             "has at least two characters, each a letter, digit, '-' or '_' (with '/' between "
+                             "parts), e.g. sms3d/pick-v1/scripted-v0")
         raise ValueError(f"dataset_id must be Minari's (namespace/)name-v<version>, e.g. "
                          f"sms3d/pick-v1/scripted-v0; got {dataset_id!r}")
-    return str(dataset_id)
+    return dataset_id
 
 
 def dataset_path(dataset_id: str) -> Path:
     """The folder of ``dataset_id`` under :func:`datasets_root` (whether or not it exists)."""
     return datasets_root() / dataset_id
+
+
+def check_not_namespace(dataset_id: str) -> None:
+    """``DatasetError`` when the folder of ``dataset_id`` is a Minari namespace, one that holds
+    other datasets (``sms3d/pick-v1`` beside ``sms3d/pick-v1/scripted-v0``), naming what it holds:
+    an id of that name can be neither recorded nor deleted without them."""
+    folder = dataset_path(dataset_id)
+    if not folder.is_dir() or (folder / "data").is_dir():
+        return
+    held = sorted(str(p.parent.parent.relative_to(datasets_root())) for p in folder.rglob("data/metadata.json"))
+    if held or (folder / "namespace_metadata.json").is_file():
+        raise DatasetError(f"{dataset_id!r} is a Minari namespace in {datasets_root()}, not a dataset: it holds "
+                           f"{', '.join(held) if held else 'no dataset yet'}; name a dataset of its own "
+                           f"(e.g. {dataset_id}/NAME-v0)")
 
 
 def recording_of(dataset_id: str) -> dict[str, Any] | None:
@@ -285,14 +323,18 @@ def record_datasets(targets: Sequence[tuple[str, gym.Env]], make_expert: Callabl
     for dataset_id, env in targets:
         check_dataset_id(dataset_id)
         check_recordable(env)
+        check_not_namespace(dataset_id)
         if dataset_path(dataset_id).exists():
             raise DatasetError(f"a Minari dataset {dataset_id!r} exists in {datasets_root()}; choose another id or "
                                "delete it (sms3d record-demos --overwrite)")
     rng = np.random.default_rng(seeds[0] if len(seeds) else 0) if rng is None else rng
     labellers = [ExpertLabels(env, make_expert, privileged) for _, env in targets]
-    collectors = [minari.DataCollector(labeller, step_data_callback=_LabelledStep,
-                                       episode_metadata_callback=_EpisodeOutcome, record_infos=True)
-                  for labeller in labellers]
+    root = datasets_root()
+    remove_orphaned_temporaries(root)
+    with minari_root(temp_path(root / RECORDING_CACHE)):  # where each DataCollector makes its cache
+        collectors = [minari.DataCollector(labeller, step_data_callback=_LabelledStep,
+                                           episode_metadata_callback=_EpisodeOutcome, record_infos=True)
+                      for labeller in labellers]
     seeds_of: list[list[int]] = [[] for _ in targets]
     try:
         successes = 0
@@ -334,12 +376,39 @@ def record_datasets(targets: Sequence[tuple[str, gym.Env]], make_expert: Callabl
     finally:
         for collector in collectors:
             collector.close()
+        shutil.rmtree(temp_path(root / RECORDING_CACHE), ignore_errors=True)
 
 
 def delete_dataset(dataset_id: str) -> None:
     """Remove ``dataset_id``'s folder under :func:`datasets_root` (a complete dataset or what a
-    cut recording left)."""
+    cut recording left); never a namespace's, which holds other datasets (``DatasetError``,
+    :func:`check_not_namespace`)."""
+    check_not_namespace(dataset_id)
     shutil.rmtree(dataset_path(dataset_id), ignore_errors=True)
+
+
+def _refuse_non_finite(dataset: str, episode: int, field: str, values: Any) -> None:
+    """``DatasetError`` naming the dataset, episode and field when ``values`` hold a NaN or an
+    infinity (learnt from, one turns every weight NaN)."""
+    values = np.asarray(values)
+    if np.issubdtype(values.dtype, np.number) and not np.isfinite(values).all():
+        rows = np.unique(np.nonzero(~np.isfinite(values))[0])
+        raise DatasetError(f"dataset {dataset!r}, episode {episode}: {field} holds non-finite values (NaN or "
+                           f"infinity) in {len(rows)} row(s), first row {int(rows[0])}; record it again "
+                           "(sms3d record-demos) or leave it out")
+
+
+def check_finite(dataset: Any) -> None:
+    """``DatasetError`` naming the dataset, episode and field (``observations[KEY]``,
+    ``actions``, ``infos[expert_action]``) of the first value in ``dataset`` that is not finite."""
+    name = dataset.spec.dataset_id
+    for ep in dataset.iterate_episodes():
+        observations = ep.observations if isinstance(ep.observations, dict) else {"": ep.observations}
+        for key, values in observations.items():
+            _refuse_non_finite(name, ep.id, f"observations[{key!r}]" if key else "observations", values)
+        _refuse_non_finite(name, ep.id, "actions", ep.actions)
+        if "expert_action" in (ep.infos or {}):
+            _refuse_non_finite(name, ep.id, "infos['expert_action']", ep.infos["expert_action"])
 
 
 def labelled_steps(datasets: Sequence[Any], keys: Sequence[str]) -> dict[str, np.ndarray]:
@@ -347,7 +416,8 @@ def labelled_steps(datasets: Sequence[Any], keys: Sequence[str]) -> dict[str, np
     ``actions`` ``(steps, 7)`` float32 (the ``expert_action`` labels) and ``episode`` ``(steps,)``
     (the kept episode's number, counted over the datasets in order). Episodes in which the expert acted and failed are dropped, and so
     are steps whose label is not valid; each episode's last observation, after its last action,
-    has no step. ``DatasetError`` naming a dataset without the labels or the keys."""
+    has no step. ``DatasetError`` naming a dataset without the labels or the keys, or the
+    episode and field of a step that is not finite."""
     obs_rows: dict[str, list[np.ndarray]] = {k: [] for k in keys}
     labels: list[np.ndarray] = []
     episode: list[np.ndarray] = []
@@ -367,7 +437,9 @@ def labelled_steps(datasets: Sequence[Any], keys: Sequence[str]) -> dict[str, np
             steps = len(ep.actions)
             keep = np.asarray(infos["label_valid"][:steps], bool)
             for k in keys:
+                _refuse_non_finite(name, ep.id, f"observations[{k!r}]", ep.observations[k][:steps])
                 obs_rows[k].append(np.asarray(ep.observations[k][:steps][keep], np.float32))
+            _refuse_non_finite(name, ep.id, "infos['expert_action']", infos["expert_action"][:steps])
             labels.append(np.asarray(infos["expert_action"][:steps][keep], np.float32))
             episode.append(np.full(int(keep.sum()), len(episode), np.int64))
     if not labels or not sum(len(a) for a in labels):

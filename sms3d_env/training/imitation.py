@@ -48,6 +48,10 @@ TRAIN_ENV_ID = "SMS3DPickTrain-v1"
 TEACHERS = ("estimate", "truth")
 
 
+class NonFiniteLossError(RuntimeError):
+    """Behaviour cloning's loss became NaN or infinite: the run stops unfinished."""
+
+
 @dataclass(frozen=True)
 class BCConfig:
     """Demonstration collection and behaviour cloning settings.
@@ -214,13 +218,14 @@ def _reuse_or_record(ids: list[str], record: Any) -> list[Any]:
 
 
 def given_demos(cfg: BCConfig) -> list[Any]:
-    """The datasets ``cfg.demos`` (none: ``[]``), checked to be of the env the clone runs in:
-    ``TRAIN_ENV_ID`` with ``cfg.posture_target`` (``DatasetError`` naming the dataset)."""
+    """The datasets ``cfg.demos`` (none: ``[]``), checked to be finite and of the env the clone
+    runs in: ``TRAIN_ENV_ID`` with ``cfg.posture_target`` (``DatasetError`` naming the dataset)."""
     from sms3d_env.env_args import translate_legacy_options
-    from sms3d_env.training.demonstrations import DatasetError, open_dataset
+    from sms3d_env.training.demonstrations import DatasetError, check_finite, open_dataset
 
     datasets = [open_dataset(i) for i in cfg.demos]
     for dataset_id, dataset in zip(cfg.demos, datasets, strict=True):
+        check_finite(dataset)
         spec = dataset.env_spec
         if spec is None or spec.id != TRAIN_ENV_ID:
             raise DatasetError(f"dataset {dataset_id!r} was recorded on {getattr(spec, 'id', 'an env it cannot rebuild')}; "
@@ -293,7 +298,9 @@ def build_policy_model(env: Any, demos: dict[str, np.ndarray], net_arch: tuple[i
 def behaviour_clone(model: Any, demos: dict[str, np.ndarray], epochs: int, batch_size: int,
                     learning_rate: float, seed: int, progress: bool = True) -> list[float]:
     """Regress the policy's mean action onto the demonstrations' actions; returns the loss per
-    epoch. Trains the shared features, the policy network and the action head (not the value)."""
+    epoch. Trains the shared features, the policy network and the action head (not the value).
+    ``NonFiniteLossError`` as soon as a batch's loss is NaN or infinite, before it reaches the
+    weights."""
     import torch as th
     from tqdm import tqdm
 
@@ -309,7 +316,7 @@ def behaviour_clone(model: Any, demos: dict[str, np.ndarray], epochs: int, batch
     gen = th.Generator().manual_seed(seed)
     losses = []
     policy.train()
-    for _ in tqdm(range(epochs), desc="behaviour cloning", disable=not progress, unit="epoch"):
+    for epoch in tqdm(range(epochs), desc="behaviour cloning", disable=not progress, unit="epoch"):
         order = th.randperm(n, generator=gen)
         total = 0.0
         for start in range(0, n, batch_size):
@@ -318,6 +325,10 @@ def behaviour_clone(model: Any, demos: dict[str, np.ndarray], epochs: int, batch
             latent_pi = policy.mlp_extractor.forward_actor(features)
             mean = policy.action_net(latent_pi)
             loss = th.nn.functional.mse_loss(mean, target[idx])
+            if not th.isfinite(loss):
+                raise NonFiniteLossError(f"behaviour cloning: the loss became {float(loss.detach())} in epoch {epoch + 1} of "
+                                         f"{epochs} (a diverging regression: lower learning_rate, now {learning_rate}); "
+                                         "the run stops unfinished, with no model.zip or summary.json")
             opt.zero_grad()
             loss.backward()
             opt.step()
@@ -341,49 +352,51 @@ def train_bc(cfg: BCConfig, progress: bool = True, overwrite: bool = False) -> d
 
     demo_sets = given_demos(cfg)
     run = open_run_folder(cfg.out, run_settings(asdict(cfg)), overwrite=overwrite, may_change=("torch_threads",))
-    out = run.path
-    root = out / "datasets"
-    if run.resumed:
-        finished = finished_run(out)
-        if finished is not None:
-            return finished
-        saved = complete_datasets(root)
-        print(f"resuming {out}: reusing {', '.join(saved) if saved else 'no recorded dataset yet'}")
-    with torch_threads(cfg.torch_threads):
-        t0 = time.perf_counter()
-        demo_sets = demo_sets or own_demos(cfg, root, progress)
-        env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(cfg.num_mushrooms[0], posture_target=cfg.posture_target))
-        keys = list(env.observation_space.spaces)
-        demos = labelled_steps(demo_sets, keys)
-        t_demo = time.perf_counter() - t0
-        try:
-            model = build_policy_model(env, demos, cfg.net_arch, cfg.log_std, cfg.seed)
-        finally:
-            env.close()
-        losses = behaviour_clone(model, demos, cfg.epochs, cfg.batch_size, cfg.learning_rate,
-                                 cfg.seed, progress)
-        data, labelled = demos, list(demo_sets)
-        for r in range(1, cfg.dagger_rounds + 1):
-            def actor(obs: dict[str, np.ndarray]) -> np.ndarray:
-                return model.predict(obs, deterministic=True)[0]
+    with run:  # holds the folder's lock until the run ends
+        out = run.path
+        root = out / "datasets"
+        if run.resumed:
+            finished = finished_run(out)
+            if finished is not None:
+                return finished
+            run.check_writable()
+            saved = complete_datasets(root)
+            print(f"resuming {out}: reusing {', '.join(saved) if saved else 'no recorded dataset yet'}")
+        with torch_threads(cfg.torch_threads):
+            t0 = time.perf_counter()
+            demo_sets = demo_sets or own_demos(cfg, root, progress)
+            env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(cfg.num_mushrooms[0], posture_target=cfg.posture_target))
+            keys = list(env.observation_space.spaces)
+            demos = labelled_steps(demo_sets, keys)
+            t_demo = time.perf_counter() - t0
+            try:
+                model = build_policy_model(env, demos, cfg.net_arch, cfg.log_std, cfg.seed)
+            finally:
+                env.close()
+            losses = behaviour_clone(model, demos, cfg.epochs, cfg.batch_size, cfg.learning_rate,
+                                     cfg.seed, progress)
+            data, labelled = demos, list(demo_sets)
+            for r in range(1, cfg.dagger_rounds + 1):
+                def actor(obs: dict[str, np.ndarray]) -> np.ndarray:
+                    return model.predict(obs, deterministic=True)[0]
 
-            labelled += dagger_round(cfg, r, demo_sets, actor, root, progress)
-            data = labelled_steps(labelled, keys)
-            losses += behaviour_clone(model, data, cfg.dagger_epochs, cfg.batch_size,
-                                      cfg.learning_rate, cfg.seed + r, progress)
-        wall = time.perf_counter() - t0
-    config = {"recipe": "bc", "algo": "ppo", "env_id": TRAIN_ENV_ID,
-              "env_options": {**sms3d_env.TRAIN_OPTIONS, **env_options(cfg.posture_target)},
-              "max_episode_steps": 250,
-              **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
-    write_atomic(out / "config.json", json.dumps(config, indent=2))
-    save_model(model, out / "model.zip")
-    summary = {"recipe": "bc", "demos": [d.spec.dataset_id for d in demo_sets],
-               "demo_episodes": int(sum(d.total_episodes for d in demo_sets)),
-               "demo_episodes_kept": int(len(np.unique(demos["episode"]))),
-               "demo_steps": int(len(demos["actions"])), "dagger_rounds": cfg.dagger_rounds,
-               "training_steps": int(len(data["actions"])), "final_loss": losses[-1],
-               "demo_wall_s": round(t_demo, 1), "wall_s": round(wall, 1),
-               "model": str(out / "model.zip")}
-    write_atomic(out / "summary.json", json.dumps(summary, indent=2))
-    return summary
+                labelled += dagger_round(cfg, r, demo_sets, actor, root, progress)
+                data = labelled_steps(labelled, keys)
+                losses += behaviour_clone(model, data, cfg.dagger_epochs, cfg.batch_size,
+                                          cfg.learning_rate, cfg.seed + r, progress)
+            wall = time.perf_counter() - t0
+        config = {"recipe": "bc", "algo": "ppo", "env_id": TRAIN_ENV_ID,
+                  "env_options": {**sms3d_env.TRAIN_OPTIONS, **env_options(cfg.posture_target)},
+                  "max_episode_steps": 250,
+                  **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
+        write_atomic(out / "config.json", json.dumps(config, indent=2))
+        save_model(model, out / "model.zip")
+        summary = {"recipe": "bc", "demos": [d.spec.dataset_id for d in demo_sets],
+                   "demo_episodes": int(sum(d.total_episodes for d in demo_sets)),
+                   "demo_episodes_kept": int(len(np.unique(demos["episode"]))),
+                   "demo_steps": int(len(demos["actions"])), "dagger_rounds": cfg.dagger_rounds,
+                   "training_steps": int(len(data["actions"])), "final_loss": losses[-1],
+                   "demo_wall_s": round(t_demo, 1), "wall_s": round(wall, 1),
+                   "model": str(out / "model.zip")}
+        write_atomic(out / "summary.json", json.dumps(summary, indent=2))
+        return summary

@@ -405,63 +405,65 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
     if cfg.flat_observation:
         saved["observation_keys"] = _observation_keys(cfg)
     run = open_run_folder(cfg.out, run_settings(saved), overwrite=overwrite, may_change=RUN_ONLY_FIELDS)
-    out = run.path
-    finished = finished_run(out) if run.resumed else None
-    if finished is not None:
-        return finished
-    write_atomic(out / "config.json", json.dumps(saved, indent=2))
-    checkpoint = latest_checkpoint(out / "checkpoints", cfg) if run.resumed else None
-    start = 0 if checkpoint is None else checkpoint_steps(checkpoint)
-    if run.resumed:
-        print(f"resuming {out} from step {start} of {cfg.total_steps}"
-              + ("" if checkpoint else " (no complete checkpoint yet)"))
-    env = vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"), cfg.vec_env,
-                  continue_monitor=run.resumed)
-    if cfg.normalize:
-        env = normalized(env, training=True, reward_gamma=cfg.gamma if cfg.normalize_reward else None)
-    eval_env = None
-    try:
-        if checkpoint is not None:
-            model = _resume_from(checkpoint, env, cfg)
-        else:
-            model = _build_model(cfg, env)
-            if cfg.init_model is not None:
-                _start_from(model, env, cfg)
-        formats = (["stdout"] if cfg.verbose else []) + (["tensorboard"] if _tensorboard_available() else [])
-        logger = configure(str(out), formats)
-        logger.output_formats.append(_progress_csv(out / "progress.csv", start if run.resumed else None))
-        model.set_logger(logger)
-        callbacks: list[Any] = []
-        if cfg.eval_freq > 0:
-            # Periodic evaluation under the training pose condition (fixed seeds): fresh beds, not
-            # the training pool's, and every episode from home.
-            eval_env = vec_env(cfg.env_kwargs(evaluation=True), 1, cfg.seed + 10_000, None)
-            if cfg.normalize:
-                # EvalCallback copies the training statistics into it before each evaluation.
-                eval_env = normalized(eval_env, training=False)
-            callbacks.append(_evaluation(eval_env, env, out, cfg, start if run.resumed else None))
-        if cfg.checkpoint_freq > 0:
-            callbacks.append(_checkpoints(env, out / "checkpoints", cfg))
-        if cfg.pregrasp_anneal:
-            callbacks.append(pregrasp_annealing(cfg.pregrasp_start))
-        if cfg.max_wall_s is not None:
-            callbacks.append(wall_clock_limit(cfg.max_wall_s))
-        t0 = time.perf_counter()
-        # SB3 adds the steps already made to total_timesteps, so schedules run over the whole run.
-        model.learn(total_timesteps=cfg.total_steps - start, callback=CallbackList(callbacks),
-                    reset_num_timesteps=checkpoint is None, progress_bar=False)
-        wall = time.perf_counter() - t0
-        _save_model_and_stats(model, env, cfg.normalize, out / "model.zip", out / OBS_STATS_FILE)
-        steps = int(model.num_timesteps) - start
-        summary = {
-            "algo": cfg.algo, "steps": int(model.num_timesteps), "resumed_from_step": start, "wall_s": round(wall, 1),
-            "steps_per_s": round(steps / wall, 1) if wall > 0 else math.nan,
-            "n_envs": cfg.n_envs, "pose_source": cfg.pose_source, "pose_error_deg": cfg.pose_error_deg,
-            "model": str(out / "model.zip"), "tensorboard": "tensorboard" in formats,
-        }
-        write_atomic(out / "summary.json", json.dumps(summary, indent=2))
-        return summary
-    finally:
-        env.close()
-        if eval_env is not None:
-            eval_env.close()
+    with run:  # holds the folder's lock until the run ends
+        out = run.path
+        finished = finished_run(out) if run.resumed else None
+        if finished is not None:
+            return finished
+        run.check_writable()
+        write_atomic(out / "config.json", json.dumps(saved, indent=2))
+        checkpoint = latest_checkpoint(out / "checkpoints", cfg) if run.resumed else None
+        start = 0 if checkpoint is None else checkpoint_steps(checkpoint)
+        if run.resumed:
+            print(f"resuming {out} from step {start} of {cfg.total_steps}"
+                  + ("" if checkpoint else " (no complete checkpoint yet)"))
+        env = vec_env(cfg.env_kwargs(), cfg.n_envs, cfg.seed, str(out / "monitor"), cfg.vec_env,
+                      continue_monitor=run.resumed)
+        if cfg.normalize:
+            env = normalized(env, training=True, reward_gamma=cfg.gamma if cfg.normalize_reward else None)
+        eval_env = None
+        try:
+            if checkpoint is not None:
+                model = _resume_from(checkpoint, env, cfg)
+            else:
+                model = _build_model(cfg, env)
+                if cfg.init_model is not None:
+                    _start_from(model, env, cfg)
+            formats = (["stdout"] if cfg.verbose else []) + (["tensorboard"] if _tensorboard_available() else [])
+            logger = configure(str(out), formats)
+            logger.output_formats.append(_progress_csv(out / "progress.csv", start if run.resumed else None))
+            model.set_logger(logger)
+            callbacks: list[Any] = []
+            if cfg.eval_freq > 0:
+                # Periodic evaluation under the training pose condition (fixed seeds): fresh beds, not
+                # the training pool's, and every episode from home.
+                eval_env = vec_env(cfg.env_kwargs(evaluation=True), 1, cfg.seed + 10_000, None)
+                if cfg.normalize:
+                    # EvalCallback copies the training statistics into it before each evaluation.
+                    eval_env = normalized(eval_env, training=False)
+                callbacks.append(_evaluation(eval_env, env, out, cfg, start if run.resumed else None))
+            if cfg.checkpoint_freq > 0:
+                callbacks.append(_checkpoints(env, out / "checkpoints", cfg))
+            if cfg.pregrasp_anneal:
+                callbacks.append(pregrasp_annealing(cfg.pregrasp_start))
+            if cfg.max_wall_s is not None:
+                callbacks.append(wall_clock_limit(cfg.max_wall_s))
+            t0 = time.perf_counter()
+            # SB3 adds the steps already made to total_timesteps, so schedules run over the whole run.
+            model.learn(total_timesteps=cfg.total_steps - start, callback=CallbackList(callbacks),
+                        reset_num_timesteps=checkpoint is None, progress_bar=False)
+            wall = time.perf_counter() - t0
+            _save_model_and_stats(model, env, cfg.normalize, out / "model.zip", out / OBS_STATS_FILE)
+            steps = int(model.num_timesteps) - start
+            summary = {
+                "algo": cfg.algo, "steps": int(model.num_timesteps), "resumed_from_step": start, "wall_s": round(wall, 1),
+                "steps_per_s": round(steps / wall, 1) if wall > 0 else math.nan,
+                "n_envs": cfg.n_envs, "pose_source": cfg.pose_source, "pose_error_deg": cfg.pose_error_deg,
+                "model": str(out / "model.zip"), "tensorboard": "tensorboard" in formats,
+            }
+            write_atomic(out / "summary.json", json.dumps(summary, indent=2))
+            return summary
+        finally:
+            env.close()
+            if eval_env is not None:
+                eval_env.close()

@@ -293,42 +293,44 @@ def train_trigger(cfg: TriggerConfig, progress: bool = True, overwrite: bool = F
 
     run = open_run_folder(cfg.out, run_settings(asdict(cfg)), overwrite=overwrite, may_change=RUN_ONLY_FIELDS,
                           may_grow=EXTENSIBLE_FIELDS)
-    out = run.path
-    if run.resumed:
-        finished = finished_run(out, episodes=cfg.episodes)
-        if finished is not None:
-            return finished
-        # A summary of fewer episodes is not this run's: the run is unfinished until it writes its own.
-        (out / "summary.json").unlink(missing_ok=True)
-        labelled = sum(stop - first for first, stop, _, made in label_chunks(cfg) if made)
-        print(f"resuming {out}: {labelled} of {cfg.episodes} episodes labelled")
-    with torch_threads(cfg.torch_threads):
-        t0 = time.perf_counter()
-        labels = collect_labels(cfg, progress)
-        t_labels = time.perf_counter() - t0
-        if len(labels["labels"]) == 0:
-            raise RuntimeError("no episode reached the trigger's radius: nothing to learn from "
-                               "(check the env options and the pose error range)")
-        model, losses = fit_trigger(cfg, labels, progress)
-        mean = model.predict({k: labels[k] for k in model.observation_space.spaces}, deterministic=True)[0]
-        wall = time.perf_counter() - t0
-    from sms3d_env.training.residual import DESCEND_TRIGGER
+    with run:  # holds the folder's lock until the run ends
+        out = run.path
+        if run.resumed:
+            finished = finished_run(out, episodes=cfg.episodes)
+            if finished is not None:
+                return finished
+            run.check_writable()
+            # A summary of fewer episodes is not this run's: the run is unfinished until it writes its own.
+            (out / "summary.json").unlink(missing_ok=True)
+            labelled = sum(stop - first for first, stop, _, made in label_chunks(cfg) if made)
+            print(f"resuming {out}: {labelled} of {cfg.episodes} episodes labelled")
+        with torch_threads(cfg.torch_threads):
+            t0 = time.perf_counter()
+            labels = collect_labels(cfg, progress)
+            t_labels = time.perf_counter() - t0
+            if len(labels["labels"]) == 0:
+                raise RuntimeError("no episode reached the trigger's radius: nothing to learn from "
+                                   "(check the env options and the pose error range)")
+            model, losses = fit_trigger(cfg, labels, progress)
+            mean = model.predict({k: labels[k] for k in model.observation_space.spaces}, deterministic=True)[0]
+            wall = time.perf_counter() - t0
+        from sms3d_env.training.residual import DESCEND_TRIGGER
 
-    config = {"recipe": "trigger-rollouts", "algo": "ppo", "env_id": TRAIN_ENV_ID,
-              "env_options": {**sms3d_env.TRAIN_OPTIONS, **cfg.env_options()},
-              "max_episode_steps": 250, "residual_scale": TRIGGER_ONLY_SCALE,
-              "residual_descend_trigger": True, "residual_trigger_only": True,
-              **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
-    write_atomic(out / "config.json", json.dumps(config, indent=2))
-    save_model(model, out / "model.zip")
-    y = labels["labels"]
-    fires = mean[:, 0] > DESCEND_TRIGGER
-    summary = {"recipe": "trigger-rollouts", "episodes": cfg.episodes,
-               "scripted_success": float(labels["scripted_success"].mean()),
-               "labelled_states": int(len(y)), "labels": {str(v): int((y == v).sum()) for v in (-1, 0, 1)},
-               "fires_in_labelled_states": int(fires.sum()),
-               "mean_label_where_it_fires": float(y[fires].mean()) if fires.any() else None,
-               "final_loss": losses[-1], "labels_wall_s": round(t_labels, 1), "wall_s": round(wall, 1),
-               "model": str(out / "model.zip")}
-    write_atomic(out / "summary.json", json.dumps(summary, indent=2))
-    return summary
+        config = {"recipe": "trigger-rollouts", "algo": "ppo", "env_id": TRAIN_ENV_ID,
+                  "env_options": {**sms3d_env.TRAIN_OPTIONS, **cfg.env_options()},
+                  "max_episode_steps": 250, "residual_scale": TRIGGER_ONLY_SCALE,
+                  "residual_descend_trigger": True, "residual_trigger_only": True,
+                  **{k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}}
+        write_atomic(out / "config.json", json.dumps(config, indent=2))
+        save_model(model, out / "model.zip")
+        y = labels["labels"]
+        fires = mean[:, 0] > DESCEND_TRIGGER
+        summary = {"recipe": "trigger-rollouts", "episodes": cfg.episodes,
+                   "scripted_success": float(labels["scripted_success"].mean()),
+                   "labelled_states": int(len(y)), "labels": {str(v): int((y == v).sum()) for v in (-1, 0, 1)},
+                   "fires_in_labelled_states": int(fires.sum()),
+                   "mean_label_where_it_fires": float(y[fires].mean()) if fires.any() else None,
+                   "final_loss": losses[-1], "labels_wall_s": round(t_labels, 1), "wall_s": round(wall, 1),
+                   "model": str(out / "model.zip")}
+        write_atomic(out / "summary.json", json.dumps(summary, indent=2))
+        return summary

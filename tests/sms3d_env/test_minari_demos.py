@@ -5,8 +5,14 @@ env comes back from its spec, and which the bc recipe clones into a policy that 
 from __future__ import annotations
 
 import importlib.metadata
+import json
+import re
+import shutil
+import subprocess
+import sys
 
 import gymnasium as gym
+import h5py
 import minari
 import numpy as np
 import pytest
@@ -16,8 +22,15 @@ from sms3d_env.cli import main
 from sms3d_env.pickers.episode import run_episode
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.pose_sources import UniformNoisyPose
-from sms3d_env.training.demonstrations import DatasetError
-from sms3d_env.training.imitation import BCConfig, train_bc, train_env_kwargs
+from sms3d_env.training.demonstrations import DatasetError, datasets_root, labelled_steps
+from sms3d_env.training.imitation import (
+    BCConfig,
+    NonFiniteLossError,
+    behaviour_clone,
+    build_policy_model,
+    train_bc,
+    train_env_kwargs,
+)
 
 DATASET = "sms3d/pick-v1/scripted-v0"
 SEEDS = (5, 6, 7)
@@ -90,9 +103,91 @@ def test_an_existing_id_is_refused_unless_overwritten(minari_root, capsys):
     assert minari.load_dataset(other).total_episodes == 1
 
 
+@pytest.mark.parametrize("overwrite", [[], ["--overwrite"]])
+def test_an_id_that_names_a_namespace_is_refused_listing_its_datasets(minari_root, capsys, overwrite):
+    namespace = DATASET.rpartition("/")[0]
+    assert main(["record-demos", "--dataset-id", namespace, "--episodes", "1", "--num-mushrooms", "5",
+                 *overwrite]) == 2
+    out = capsys.readouterr().out
+    assert f"{namespace!r} is a Minari namespace" in out and DATASET in out
+    assert minari.load_dataset(DATASET).total_episodes == 3
+
+
+def test_an_empty_minari_datasets_path_is_refused_as_minari_takes_it_as_set(monkeypatch, capsys):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", "")
+    with pytest.raises(DatasetError, match="MINARI_DATASETS_PATH is set but empty"):
+        datasets_root()
+    assert main(["record-demos", "--dataset-id", "sms3d/pick-v1/empty-v0", "--episodes", "1"]) == 2
+    assert "MINARI_DATASETS_PATH is set but empty" in capsys.readouterr().out
+
+
+def test_a_killed_recordings_cache_is_removed_by_the_next_recording(minari_root):
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                           text=True, check=True)
+    orphan = minari_root / f".recording.tmp{ended.stdout.strip()}"
+    (orphan / "tmpcut" / "data").mkdir(parents=True)  # what a DataCollector killed with -9 left
+    running = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        live = minari_root / f".recording.tmp{running.pid}"
+        (live / "tmpbusy").mkdir(parents=True)
+        assert main(["record-demos", "--dataset-id", "sms3d/pick-v1/after-kill-v0", "--episodes", "1",
+                     "--num-mushrooms", "5"]) == 0
+        assert not orphan.exists() and live.is_dir()  # a running recording's cache stays
+        assert sorted(p.name for p in minari_root.iterdir() if p.name.startswith(".")) == [live.name]
+    finally:
+        running.kill()
+        running.wait()
+        shutil.rmtree(live, ignore_errors=True)
+
+
+def _spoilt_copy(root, dataset_id: str, field: str) -> str:
+    """A copy of ``DATASET`` under ``root`` named ``dataset_id`` whose first episode holds a NaN in
+    ``field`` (a path inside the episode's HDF5 group)."""
+    shutil.copytree(root / DATASET, root / dataset_id)
+    metadata = root / dataset_id / "data" / "metadata.json"
+    metadata.write_text(json.dumps({**json.loads(metadata.read_text()), "dataset_id": dataset_id}))
+    with h5py.File(root / dataset_id / "data" / "main_data.hdf5", "r+") as f:
+        values = f[f"episode_0/{field}"]
+        row = values[1]
+        row[0] = np.nan
+        values[1] = row
+    return dataset_id
+
+
+@pytest.mark.parametrize("field, named", [("infos/expert_action", "infos['expert_action']"),
+                                          ("observations/target_pose", "observations['target_pose']")])
+def test_bc_refuses_a_dataset_holding_nan_before_training(minari_root, tmp_path, capsys, field, named):
+    dataset_id = _spoilt_copy(minari_root, f"sms3d/pick-v1/nan-{field.split('/')[-1].replace('_', '-')}-v0",
+                              field)
+    out = tmp_path / "bc"
+    assert main(["train-policy", "pick_policy", "--demos", dataset_id, "--out", str(out)]) == 2
+    message = capsys.readouterr().out
+    assert f"dataset {dataset_id!r}, episode 0: {named} holds non-finite values" in message
+    assert not out.exists()
+    with pytest.raises(DatasetError, match=rf"episode 0: {re.escape(named)} holds non-finite"):
+        labelled_steps([minari.load_dataset(dataset_id)], ["target_pose"])  # DAgger rounds' data too
+
+
+def test_a_loss_that_becomes_nan_stops_behaviour_cloning_before_the_weights(minari_root):
+    import torch as th
+
+    env = gym.make("SMS3DPickTrain-v1", **train_env_kwargs(BED))
+    try:
+        keys = list(env.observation_space.spaces)
+        demos = labelled_steps([minari.load_dataset(DATASET)], keys)
+        model = build_policy_model(env, demos, (16,), -2.0, 0)
+    finally:
+        env.close()
+    demos["actions"][3, 0] = np.nan  # past the dataset checks, as a diverging regression would be
+    with pytest.raises(NonFiniteLossError, match="loss became nan in epoch 1 of 2"):
+        behaviour_clone(model, demos, 2, len(demos["actions"]), 1e-3, 0, progress=False)
+    assert all(bool(th.isfinite(p).all()) for p in model.policy.parameters())
+
+
 @pytest.mark.parametrize("argv, named", [
     (["--episodes", "0"], "--episodes"),
     (["--dataset-id", "no-version"], "dataset_id"),
+    (["--dataset-id", "a/pick-v0"], "namespace 'a'"),
     (["--num-mushrooms", "0"], "--num-mushrooms"),
     (["--pose-error-deg", "10", "--pose-source", "oracle"], "--pose-source"),
     (["--pose-error-range", "30", "10"], "--pose-error-range"),
