@@ -102,3 +102,21 @@ def processes():
     if not Path("/proc/self/stat").exists():
         pytest.skip("reads processes from /proc")
     return ProcessTable()
+
+
+def _without_root_override() -> None:
+    """Drop, in a child of root, the capabilities that let root write a read-only folder
+    (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, CAP_FOWNER), so that such a folder is read-only to it."""
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    for capability in (1, 2, 3):
+        if libc.prctl(24, capability, 0, 0, 0) != 0:  # PR_CAPBSET_DROP
+            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
+
+
+@pytest.fixture
+def read_only_child():
+    """``subprocess`` keywords that make a read-only folder (mode 0o555) read-only to the child
+    even when the tests run as root, which may write any folder."""
+    return {"preexec_fn": _without_root_override} if os.geteuid() == 0 else {}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ctypes
 import json
 import os
 import signal
@@ -131,16 +130,7 @@ def test_overwrite_empties_a_folder_reached_through_a_symbolic_link(tmp_path):
     assert sorted(p.name for p in (tmp_path / "real").iterdir()) == [LOCK_FILE, SETTINGS_FILE]
 
 
-def _without_root_override() -> None:
-    """Drop, for a child run by root, the capabilities that let root write a read-only folder
-    (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH, CAP_FOWNER), so that the folder is read-only to it."""
-    libc = ctypes.CDLL(None, use_errno=True)
-    for capability in (1, 2, 3):
-        if libc.prctl(24, capability, 0, 0, 0) != 0:  # PR_CAPBSET_DROP
-            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP)")
-
-
-def test_a_read_only_folder_resumes_without_writing_and_refuses_to_run(tmp_path):
+def test_a_read_only_folder_resumes_without_writing_and_refuses_to_run(tmp_path, read_only_child):
     folder = tmp_path / "run"
     open_run_folder(folder, {"lr": 1e-3}).release()
     (folder / LOCK_FILE).unlink()  # as a folder copied from elsewhere might be
@@ -152,8 +142,7 @@ def test_a_read_only_folder_resumes_without_writing_and_refuses_to_run(tmp_path)
               "print(run.resumed, run.writable)\n"
               "try:\n    run.check_writable()\nexcept RunFolderError as e:\n    print(e)\n")
     done = subprocess.run([sys.executable, "-c", script, str(folder)], capture_output=True, text=True,
-                          preexec_fn=_without_root_override if os.geteuid() == 0 else None, cwd=Path(__file__).parents[2],
-                          check=False)
+                          cwd=Path(__file__).parents[2], check=False, **read_only_child)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[0] == "True False" and "not writable" in done.stdout
     assert {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} == before

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
 import subprocess
 import sys
@@ -14,7 +15,7 @@ import time
 import numpy as np
 import pytest
 
-from generator.run_folder import RunFolderError
+from generator.run_folder import LOCK_FILE, RunFolderError, lock_run_folder
 from sms3d_env.training import TrainConfig, load_model, main, train_policy
 from sms3d_env.training.actor import checkpoint_steps
 from sms3d_env.training.trigger_rollouts import TriggerConfig, train_trigger
@@ -196,3 +197,27 @@ def test_a_resume_drops_a_best_model_of_the_training_it_redoes(tmp_path, best_at
         assert (tmp_path / "best" / "best_model.zip").is_file() and callback.best_mean_reward == 5.0
     else:  # saved after it, by training this run redoes: gone, the next evaluation saves anew
         assert not (tmp_path / "best").exists() and callback.best_mean_reward == -np.inf
+
+
+@pytest.mark.parametrize("recipe", ["ppo", "pick_policy"])
+def test_a_training_in_a_folder_another_run_holds_is_refused_naming_it(tmp_path, capsys, recipe):
+    out = tmp_path / "run"
+    lock = lock_run_folder(out)  # as a first train-policy running there holds it
+    try:
+        assert main(["train-policy", recipe, "--out", str(out), "--steps" if recipe == "ppo" else "--seed", "64"]) == 2
+        assert f"{out}: another run is in progress in this folder (process {os.getpid()}" in capsys.readouterr().out
+        assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]
+    finally:
+        lock.close()
+
+
+def test_a_finished_run_in_a_read_only_folder_is_reported_with_nothing_to_do(tmp_path, read_only_child):
+    out = tmp_path / "run"
+    train_policy(TrainConfig(out=str(out), **TINY))
+    (out / LOCK_FILE).unlink()  # a finished run copied from elsewhere, without its lock file
+    for p in (out, *out.rglob("*")):
+        p.chmod(0o555 if p.is_dir() else 0o444)
+    done = subprocess.run([sys.executable, "-m", "sms3d_env.training", "train-policy", str(out / "config.json")],
+                          capture_output=True, text=True, check=False, **read_only_child)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert f"{out} is complete (summary.json); nothing to do" in done.stdout
