@@ -102,7 +102,7 @@ def checkpoint_path(folder: str | Path, algo: str, steps: int, part: str = "mode
 
 def read_saved_config(path: Path) -> dict[str, Any]:
     """A run's ``config.json`` (``PolicyFileError`` naming it when it is no JSON object)."""
-    saved = parse_json(read_run_text(path, "run configuration"), path, "the run configuration")
+    saved = parse_json(read_run_text(path, "run configuration"), path, "run configuration")
     if not isinstance(saved, dict):
         raise PolicyFileError(path, "not a run configuration (no JSON object)")
     return saved

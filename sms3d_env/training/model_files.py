@@ -92,7 +92,7 @@ def parse_json(text: str | bytes, path: Path, what: str) -> Any:
     try:
         return json.loads(text)
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
-        raise PolicyFileError(path, f"{what} is not readable JSON ({described_error(exc)})") from None
+        raise PolicyFileError(path, f"not a readable {what} ({described_error(exc)})") from None
 
 
 def check_zip_sizes(path: Path, archive: zipfile.ZipFile, member_limit: Any, total_limit: int) -> None:
@@ -305,7 +305,7 @@ class ObservationStats:
             with zipfile.ZipFile(path) as archive:
                 check_zip_sizes(path, archive, lambda _name: MAX_STATS_BYTES, MAX_STATS_BYTES)
             with np.load(path, allow_pickle=False) as z:
-                meta = parse_json(str(z["meta"]), path, "meta")
+                meta = parse_json(str(z["meta"]), path, "meta entry")
                 if meta.get("format") != _FORMAT:
                     raise ValueError(f"format {meta.get('format')!r}, expected {_FORMAT}")
                 keys = meta["keys"]
@@ -367,11 +367,11 @@ def finished_run(folder: Path, **expected: Any) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     try:
-        summary = parse_json(read_run_text(path, "run summary"), path, "the run summary")
+        summary = parse_json(read_run_text(path, "run summary"), path, "run summary")
         if not isinstance(summary, dict):
-            raise PolicyFileError(path, "not a JSON object")
+            raise PolicyFileError(path, "not a readable run summary (no JSON object)")
     except PolicyFileError as exc:
-        raise PolicyFileError(path, f"unreadable run summary ({exc.message}); --overwrite to start the run anew") from None
+        raise PolicyFileError(path, f"{exc.message}; --overwrite to start the run anew") from None
     if any(summary.get(k) != v for k, v in expected.items()):
         return None
     print(f"{folder} is complete ({path.name}); nothing to do (--overwrite to start it anew)")
