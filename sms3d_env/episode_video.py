@@ -8,6 +8,7 @@ Rendering is the env's ``rgb_array`` (off-screen: EGL on headless machines).
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,9 @@ import cv2
 import numpy as np
 
 from generator.camera import Intrinsics, project, world_from_camera_cv
+from generator.config import CameraConfig
+from generator.errors import ConfigError
+from generator.files import remove_orphaned_temporaries, temp_path
 from generator.image_text import put_text
 
 #: Seconds the last frame is repeated at the end of a video, so that the outcome can be read.
@@ -25,6 +29,41 @@ SUCCESS_RGB = (30, 140, 50)
 FAILURE_RGB = (190, 30, 30)
 # Lift (m) above which a detached target counts as being lifted, not just detached.
 _LIFTING_M = 0.0005
+#: The largest frame (height, width) a scene's env renders off-screen with the default scene
+#: camera: MuJoCo renders into the model's off-screen framebuffer, which ``generator.mjcf`` sizes
+#: to the scene camera's image (``CameraConfig``), and refuses a larger frame mid-episode.
+LARGEST_FRAME = (CameraConfig.height, CameraConfig.width)
+#: The name of an evaluation's episode video (``eval-policy --video DIR``: ``DIR/episode_<seed>.mp4``).
+EPISODE_VIDEO = re.compile(r"episode_\d+\.mp4")
+
+
+def check_frame_size(size: tuple[int, int], largest: tuple[int, int] = LARGEST_FRAME) -> tuple[int, int]:
+    """``size`` (height, width) if a video can have frames of it: even (H.264 halves the colour
+    resolution), at least 16 and at most ``largest``, the framebuffer's; ``ConfigError`` naming
+    ``video_size`` otherwise, before any episode runs."""
+    if not (len(size) == 2 and all(isinstance(n, int) and 16 <= n and n % 2 == 0 for n in size)):
+        raise ConfigError("video_size", f"must be two even integers >= 16 (height, width; H.264 halves the "
+                                        f"colour resolution), got {tuple(size)!r}")
+    if size[0] > largest[0] or size[1] > largest[1]:
+        raise ConfigError("video_size", f"{size[0]} x {size[1]} is larger than the {largest[0]} x {largest[1]} "
+                                        "that the env's off-screen framebuffer renders (MuJoCo's offheight x "
+                                        "offwidth); choose at most that")
+    return int(size[0]), int(size[1])
+
+
+def claim_video_folder(folder: str | Path, overwrite: bool = False) -> Path:
+    """``folder`` for a new evaluation's episode videos: ``ConfigError`` naming ``video`` when it
+    holds an earlier one's (``EPISODE_VIDEO``), which the new videos would mix with, unless
+    ``overwrite``, which deletes those first. Other files in it are left alone."""
+    folder = Path(folder)
+    earlier = sorted(p for p in folder.iterdir() if EPISODE_VIDEO.fullmatch(p.name)) if folder.is_dir() else []
+    if earlier and not overwrite:
+        raise ConfigError("video", f"{folder} holds {len(earlier)} episode video(s) of an earlier run "
+                                   f"({earlier[0].name}, ...); name an empty folder, or pass --overwrite to "
+                                   "replace them")
+    for video in earlier:
+        video.unlink()
+    return folder
 
 
 def episode_phase(info: dict[str, Any]) -> str:
@@ -97,7 +136,9 @@ class EpisodeVideo:
     """Annotated frames of one episode of ``env`` (``render_mode="rgb_array"``), streamed to an
     MP4 at ``path`` (or only returned, ``path=None``) at the env's pace (1 / ``control_dt``
     frames per second). The file appears when ``close`` finishes it, complete (written beside
-    it first, then renamed).
+    it first, then renamed; what a killed process left beside it is removed here).
+    The first ``capture`` raises ``ConfigError`` naming ``video_size`` when the env renders
+    frames larger than its framebuffer (:func:`check_frame_size`).
 
     Call ``capture(info, phase)`` after ``reset`` and after every ``step``, with ``ended=True``
     after the last, then ``close()``.
@@ -111,13 +152,18 @@ class EpisodeVideo:
         self.path = None if path is None else Path(path)
         self.fps = 1.0 / self.env.control_dt
         self.frames = 0  # captured so far (the file holds them and the held last one)
-        self._temp = None if path is None else self.path.with_name(f"{self.path.stem}.tmp{os.getpid()}.mp4")
+        self._temp = None if path is None else temp_path(self.path)
+        if path is not None:
+            remove_orphaned_temporaries(self.path.parent)
         self._writer: Any = None
         self._last: np.ndarray | None = None
 
     def capture(self, info: dict[str, Any], phase: str | None = None, ended: bool = False) -> np.ndarray:
         """Render, annotate (``phase``: the picker's own, else ``episode_phase(info)``; the
         outcome once ``ended``) and write one frame; returns it, (H, W, 3) uint8."""
+        if not self.frames:  # the env's model, and so its framebuffer, exists once it has been reset
+            framebuffer = self.env.world.model.vis.global_
+            check_frame_size(tuple(self.env.render_camera.size), (framebuffer.offheight, framebuffer.offwidth))
         frame = self.env.render()
         h, w = frame.shape[:2]
         caption = f"t = {info['time_s']:.2f} s | {phase or episode_phase(info)}"

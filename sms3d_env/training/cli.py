@@ -11,6 +11,7 @@ from typing import Any
 from generator.errors import ConfigError
 from generator.files import write_atomic
 from generator.run_folder import RunFolderError
+from sms3d_env.episode_video import check_frame_size, claim_video_folder
 from sms3d_env.training.config import (
     ALGOS,
     ENV_IDS,
@@ -202,6 +203,9 @@ def _cmd_eval(args: Any) -> int:
         print(f"error: argument --json: must name a file to write, got {args.json!r}")
         return 2
     try:
+        if args.video is not None:
+            check_frame_size(tuple(args.video_size))
+            claim_video_folder(args.video, args.overwrite)
         res = evaluate_policy_success(args.model, episodes=args.episodes, pose_error_deg=args.pose_error_deg,
                                       seed=args.seed, num_mushrooms=args.num_mushrooms, progress=True,
                                       video_dir=args.video, video_size=tuple(args.video_size), env_id=args.env_id)
@@ -338,11 +342,16 @@ def register(subparsers: Any) -> None:
                    help="mushrooms per bed (default: the training bed size, else 25)")
     e.add_argument("--json", default=None, help="also write the result here")
     e.add_argument("--video", default=None, metavar="DIR",
-                   help="also write each episode as DIR/episode_<seed>.mp4: the pick camera, the target "
+                   help="also write each episode as DIR/episode_<seed>.mp4 (DIR holding none yet, see "
+                        "--overwrite): the pick camera, the target "
                         "ringed, time and phase on every frame, the outcome and its cause at the end "
                         '(needs imageio-ffmpeg: pip install "sms3d-pick[video]")')
     e.add_argument("--video-size", type=int, nargs=2, default=[480, 640], metavar=("HEIGHT", "WIDTH"),
-                   help="the videos' frame size in pixels, both even (default 480 640)")
+                   help="the videos' frame size in pixels, both even, at most the env's off-screen framebuffer "
+                        "of 480 640 (the default)")
+    e.add_argument("--overwrite", action="store_true",
+                   help="with --video: delete the episode videos (episode_*.mp4) of an earlier run in DIR first; "
+                        "without it such a folder is refused, so that two runs' videos never mix")
     e.set_defaults(func=_cmd_eval)
 
     from sms3d_env.training import learning_curve

@@ -4,6 +4,8 @@ target's ring sits on the target's cap."""
 
 import json
 import os
+import subprocess
+import sys
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -14,8 +16,15 @@ import pytest
 
 import sms3d_env  # noqa: F401 - registers the environments
 from generator import SceneConfig
+from generator.errors import ConfigError
 from sms3d_env.cli import main
-from sms3d_env.episode_video import FAILURE_RGB, OUTCOME_HOLD_S, SUCCESS_RGB, target_ring
+from sms3d_env.episode_video import (
+    FAILURE_RGB,
+    OUTCOME_HOLD_S,
+    SUCCESS_RGB,
+    EpisodeVideo,
+    target_ring,
+)
 from sms3d_env.pickers.scripted import ScriptedPicker
 
 
@@ -50,12 +59,44 @@ def test_eval_policy_writes_a_playable_mp4_with_the_outcome_stamped(tmp_path, ca
 @pytest.mark.parametrize("flags, named", [
     (["--video", "{tmp}/clip"], "argument --video: "),
     (["--video", "{tmp}/v", "--video-size", "121", "160"], "argument --video-size: must be two even integers"),
+    (["--video", "{tmp}/v", "--video-size", "720", "1280"],
+     "argument --video-size: 720 x 1280 is larger than the 480 x 640 that the env's off-screen framebuffer"),
 ])
 def test_eval_policy_refuses_bad_video_flags_before_any_episode(tmp_path, capsys, flags, named):
     (tmp_path / "clip").write_text("")
     assert main(["eval-policy", "--episodes", "1", *(f.format(tmp=tmp_path) for f in flags)]) == 2
     assert named in capsys.readouterr().out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clip"]  # nothing made
+
+
+def test_a_folder_of_earlier_videos_is_refused_unless_overwritten_and_orphans_are_removed(tmp_path, capsys):
+    pytest.importorskip("imageio_ffmpeg", reason="the video extra (imageio-ffmpeg) is not installed")
+    videos = tmp_path / "videos"
+    videos.mkdir()
+    (videos / "episode_7.mp4").write_bytes(b"an earlier run's")
+    (videos / "notes.txt").write_text("mine")
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
+                           check=True)
+    orphan = videos / f"episode_9.tmp{ended.stdout.strip()}.mp4"  # what a killed eval left half-written
+    orphan.write_bytes(b"cut")
+    flags = ["eval-policy", "--episodes", "1", "--num-mushrooms", "8", "--seed", "3", "--video", str(videos),
+             "--video-size", "120", "160"]
+    assert main(flags) == 2
+    assert f"argument --video: {videos} holds 1 episode video(s) of an earlier run" in capsys.readouterr().out
+    assert (videos / "episode_7.mp4").read_bytes() == b"an earlier run's"
+    assert main([*flags, "--overwrite"]) == 0
+    assert sorted(p.name for p in videos.iterdir()) == ["episode_3.mp4", "notes.txt"]
+
+
+def test_a_frame_larger_than_the_framebuffer_is_refused_at_the_first_capture():
+    env = gym.make("SMS3DPick-v1", scene={"placement": {"num_mushrooms": 5}}, render_mode="rgb_array",
+                   render_camera={"size": (720, 1280)})
+    try:
+        _, info = env.reset(seed=0)
+        with pytest.raises(ConfigError, match="video_size: 720 x 1280 is larger than the 480 x 640"):
+            EpisodeVideo(env).capture(info)
+    finally:
+        env.close()
 
 
 def _segmentation(env, camera="pick", size=(120, 160)):
