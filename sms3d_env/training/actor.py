@@ -10,9 +10,12 @@ Trust: loading runs no code from the files. An SB3 model zip holds cloudpickled 
 spaces, schedules, policy class); :func:`load_sb3` unpickles none of them but rebuilds each from
 trusted data: the policy's description that :func:`~sms3d_env.training.model_files.save_model`
 writes into the zip (:class:`~sms3d_env.training.policy_spec.PolicySpec`), or for an RL Zoo run
-the env it names; the weights are tensors read by ``torch.load(weights_only=True)``. A zip without
-that description is refused (:func:`~sms3d_env.training.model_files.record_policy_spec` adds one to
-a file you trust). The observation statistics beside a model (``obs_rms.npz``) are plain arrays
+the env it names, or for a model SB3's own ``save`` wrote the spaces of the registered env that
+are its own (:meth:`PolicyActor._matched_spec`); the weights are tensors read by
+``torch.load(weights_only=True)``, refused when not finite. :func:`load_sb3` refuses a zip
+without that description (:func:`~sms3d_env.training.model_files.record_policy_spec` adds one to
+a file you trust). An env id a file names is one of the package's registered ids or is refused
+(:mod:`sms3d_env.training.trained_env`); no zip member is inflated past its limit. The observation statistics beside a model (``obs_rms.npz``) are plain arrays
 and are read without unpickling; an SB3 ``vecnormalize.pkl`` beside a model is never loaded, and
 an RL Zoo run's is decoded by a restricted reader that builds arrays and inert records only
 (:func:`~sms3d_env.training.zoo.read_vecnormalize`).

@@ -317,7 +317,7 @@ def with_recipe(cfg: Any, recipe: str | Path) -> Any:
 
 class _Inert:
     """An object the restricted reader does not build: the global's name, its constructor's
-    arguments and its pickled state, kept as data."""
+    arguments, its pickled state and, for a container, its items and elements, kept as data."""
 
     global_name = ""
 
