@@ -89,3 +89,103 @@ def plot_curves(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path, t
     ax.set_title(title)
     fig.tight_layout()
     save_figure(fig, path)
+
+
+def polyline_points(xy: Any, step_px: float = 2.0) -> Any:
+    """Display points every ``step_px`` along a polyline of display coordinates (N, 2)."""
+    import numpy as np
+
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    xy = xy[np.isfinite(xy).all(axis=1)]
+    if len(xy) < 2:
+        return xy
+    out = [xy[:1]]
+    for a, b in zip(xy[:-1], xy[1:]):
+        k = max(1, int(np.ceil(np.hypot(*(b - a)) / step_px)))
+        out.append(a + (b - a) * np.linspace(0.0, 1.0, k + 1)[1:, None])
+    return np.concatenate(out)
+
+
+def drawn_points(ax: Any, skip: Sequence[Any] = ()) -> Any:
+    """Display points along every line of ``ax`` (curves, error bars, vertical marks, contour
+    lines) and at every scatter marker, except the artists in ``skip``: what a label must clear."""
+    import numpy as np
+    from matplotlib.collections import LineCollection, PathCollection
+
+    points = [np.zeros((0, 2))]
+    for line in ax.get_lines():
+        if line not in skip and line.get_visible() and line.get_linestyle() not in ("None", "", " "):
+            points.append(polyline_points(line.get_transform().transform(line.get_xydata())))
+        elif line not in skip and line.get_visible():  # markers only (error-bar caps)
+            points.append(line.get_transform().transform(line.get_xydata()))
+    for coll in ax.collections:
+        if coll in skip or not coll.get_visible():
+            continue
+        if isinstance(coll, PathCollection):  # scatter markers
+            points.append(coll.get_offset_transform().transform(coll.get_offsets()))
+        elif isinstance(coll, LineCollection) or hasattr(coll, "get_paths"):
+            for path in coll.get_paths():
+                for poly in path.to_polygons(closed_only=False):
+                    points.append(polyline_points(coll.get_transform().transform(poly)))
+    return np.concatenate(points)
+
+
+def boxes_overlap(a: Any, b: Any, pad_px: float = 0.0) -> bool:
+    return a.x0 - pad_px < b.x1 and b.x0 - pad_px < a.x1 and a.y0 - pad_px < b.y1 and b.y0 - pad_px < a.y1
+
+
+def points_in_box(points: Any, box: Any, pad_px: float = 0.0) -> int:
+    x, y = points[:, 0], points[:, 1]
+    return int(((x > box.x0 - pad_px) & (x < box.x1 + pad_px) & (y > box.y0 - pad_px) & (y < box.y1 + pad_px)).sum())
+
+
+def place_clear(ax: Any, candidates: Sequence[dict[str, Any]], boxes: Sequence[Any], points: Any,
+                pad_px: float = 2.0) -> Any:
+    """Annotate ``ax`` at the first of ``candidates`` (``ax.annotate`` keyword arguments) whose
+    text lies inside the axes and clears the ``boxes`` (display bounding boxes) and ``points``
+    (display points, ``drawn_points``) by ``pad_px``; when none does, at the one that covers the
+    fewest. Returns the text. Call it once the figure's layout is final (after ``tight_layout``)."""
+    renderer = ax.figure.canvas.get_renderer()
+    frame = ax.get_window_extent(renderer)
+    best, best_cost = None, None
+    for kwargs in candidates:
+        text = ax.annotate(**kwargs)
+        box = text.get_window_extent(renderer)
+        inside = frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+        cost = (0 if inside else 10_000) + points_in_box(points, box, pad_px) + 1_000 * sum(
+            boxes_overlap(box, other, pad_px) for other in boxes)
+        if cost == 0:
+            if best is not None:
+                best.remove()
+            return text
+        if best_cost is None or cost < best_cost:
+            if best is not None:
+                best.remove()
+            best, best_cost = text, cost
+        else:
+            text.remove()
+    return best
+
+
+def label_vertical_marks(ax: Any, marks: dict[str, Any], **style: Any) -> list[Any]:
+    """Label each vertical line of ``marks`` (label -> the ``axvline``) along its side, rotated,
+    where the text clears every line, marker, the legend and the labels placed before it: the
+    right side first, then the left, from the bottom up, then from the top down. Returns the
+    texts. Call it once the figure's layout is final."""
+    ax.figure.canvas.draw()
+    renderer = ax.figure.canvas.get_renderer()
+    legend = ax.get_legend()
+    boxes = [legend.get_window_extent(renderer)] if legend is not None else []
+    points = drawn_points(ax)
+    texts = []
+    for label, line in marks.items():
+        x = line.get_xdata()[0]
+        candidates = [dict(text=label, xy=(x, y), xycoords=("data", "axes fraction"), xytext=(3 * side, 0),
+                           textcoords="offset points", rotation=90, ha="left" if side > 0 else "right", va=va,
+                           **{"fontsize": 7, "color": "grey", **style})
+                      for y, va in ((0.02, "bottom"), (0.3, "bottom"), (0.98, "top"))
+                      for side in (1, -1)]
+        text = place_clear(ax, candidates, boxes, points)
+        boxes.append(text.get_window_extent(renderer))
+        texts.append(text)
+    return texts

@@ -15,7 +15,13 @@ import numpy as np
 from generator.files import write_atomic
 from sms3d_env.pickers.registry import picker_name
 from sms3d_env.study import success_map
-from sms3d_env.study.figures import ORIENTATION_LABEL, draw_curve, plot_curves, save_figure
+from sms3d_env.study.figures import (
+    ORIENTATION_LABEL,
+    draw_curve,
+    label_vertical_marks,
+    plot_curves,
+    save_figure,
+)
 from sms3d_env.study.statistics import (
     TILTED_DEG,
     WITHIN_PP,
@@ -57,9 +63,7 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 7.5), sharex=True, height_ratios=[3, 2])
     for variant in dict.fromkeys(r["variant"] for r in table):
         draw_curve(top, [r for r in table if r["variant"] == variant], variant, lw=2 if variant == "default" else 1)
-    for label, err in PAPER_ERRORS_DEG.items():
-        top.axvline(err, ls=":", color="grey")
-        top.text(err, 30, f" {label}: {err}°", fontsize=7, color="grey", rotation=90, va="bottom")
+    marks = {f"{label}: {err}°": top.axvline(err, ls=":", color="grey") for label, err in PAPER_ERRORS_DEG.items()}
     if perception:
         top.errorbar([perception["error_deg"]], [100 * perception["success"]],
                      xerr=[[perception["error_deg"] - perception["p10_error_deg"]],
@@ -91,6 +95,7 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     if causes:
         bottom.legend(fontsize=8)
     fig.tight_layout()
+    label_vertical_marks(top, marks)  # placed once the layout is final, clear of the lines and legend
     save_figure(fig, path)
 
 

@@ -14,7 +14,15 @@ from typing import Any
 
 import numpy as np
 
-from sms3d_env.study.figures import draw_curve, plot_curves, save_figure, success_axes
+from sms3d_env.study.figures import (
+    draw_curve,
+    drawn_points,
+    place_clear,
+    plot_curves,
+    polyline_points,
+    save_figure,
+    success_axes,
+)
 from sms3d_env.study.statistics import (
     TILTED_DEG,
     WITHIN_PP,
@@ -103,17 +111,19 @@ def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, panel: str = "", 
     fig, ax = plt.subplots(figsize=(8, 5.5))
     # Cells drawn at their index (errors are uneven), labelled by value.
     im = ax.imshow(s, origin="lower", cmap="RdYlGn", vmin=max(0, np.nanmin(s) - 5), vmax=100, aspect="auto")
+    cells = []
     for i in range(len(p)):
         for j in range(len(e)):
             if not np.isnan(s[i, j]):
-                ax.text(j, i, f"{s[i, j]:.0f}\n±{100 * grid['half_width'][i, j]:.0f}", ha="center",
-                        va="center", fontsize=7)
+                cells.append(ax.text(j, i, f"{s[i, j]:.0f}\n±{100 * grid['half_width'][i, j]:.0f}", ha="center",
+                        va="center", fontsize=7))
+    iso_lines = None
     oracle = s[0, 0] if e[0] == 0 and p[0] == 0 else np.nan
     if np.isfinite(oracle) and len(e) > 1 and len(p) > 1:
         levels = sorted(oracle - d for d in ISO_POINTS)
         cs = ax.contour(np.arange(len(e)), np.arange(len(p)), s, levels=levels, colors="k",
                         linewidths=[0.8, 1.6, 0.8][: len(levels)])
-        ax.clabel(cs, fmt={lv: f"oracle − {oracle - lv:.0f}" for lv in levels}, fontsize=7)
+        iso_lines = (cs, [f"oracle − {oracle - lv:.0f}" for lv in levels])
     cloud = _perception_cloud(rows)
     if cloud:
         # Measured errors mapped onto the cell axes by interpolation between cell centres.
@@ -134,7 +144,41 @@ def plot_map(rows: Sequence[dict[str, Any]], path: str | Path, panel: str = "", 
     ax.set_ylabel("cap-top position error (mm)")
     fig.colorbar(im, ax=ax, label="success (%)")
     fig.tight_layout()
+    if iso_lines:  # placed once the layout is final, clear of the cell numbers
+        label_iso_lines(ax, *iso_lines, avoid=cells)
     save_figure(fig, path)
+
+
+def label_iso_lines(ax: Any, contours: Any, labels: Sequence[str], avoid: Sequence[Any] = ()) -> list[Any]:
+    """Label each level of ``contours`` once, on its line, where the label clears the texts of
+    ``avoid`` (the cell numbers), the legend, the other levels' lines, the markers and the labels
+    placed before it: the candidates run along the line from its middle outwards. Returns the
+    labels (texts)."""
+    ax.figure.canvas.draw()
+    renderer = ax.figure.canvas.get_renderer()
+    boxes = [t.get_window_extent(renderer) for t in avoid]
+    if ax.get_legend() is not None:
+        boxes.append(ax.get_legend().get_window_extent(renderer))
+    others = drawn_points(ax, skip=[contours])
+    level_points = [[polyline_points(ax.transData.transform(seg), step_px=2.0) for seg in segs]
+                    for segs in contours.allsegs]
+    placed = []
+    for k, label in enumerate(labels[: len(level_points)]):
+        if not level_points[k]:
+            continue
+        points = np.concatenate([others] + [pts for m, segs in enumerate(level_points) if m != k for pts in segs])
+        candidates = []
+        for pts in sorted(level_points[k], key=len, reverse=True):
+            along = pts[::3]
+            middle = len(along) // 2
+            for i in sorted(range(len(along)), key=lambda i: abs(i - middle)):
+                x, y = ax.transData.inverted().transform(along[i])
+                candidates.append(dict(text=label, xy=(x, y), ha="center", va="center", fontsize=7,
+                                       bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.85)))
+        text = place_clear(ax, candidates, boxes, points)
+        boxes.append(text.get_window_extent(renderer))
+        placed.append(text)
+    return placed
 
 
 def plot_slices(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
