@@ -334,6 +334,22 @@ def load_sb3(path: str | Path, algos: tuple[str, ...], spec: PolicySpec | None =
     return model
 
 
+def _plain(value: Any) -> Any:
+    """An env option in a comparable form: a record as its fields, tuples as lists, numbers as
+    floats (so ``(10, 30)`` and ``[10.0, 30.0]``, a record and its mapping form compare equal)."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        value = dataclasses.asdict(value)
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (int, float, np.number)) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
 class PolicyActor:
     """A saved SB3 model as ``actor(obs) -> action``, its observation statistics applied when they
     were saved with it (:func:`observation_stats_path`). ``env_id``/``env_options``: what it was
@@ -366,6 +382,7 @@ class PolicyActor:
             checked_env_id(recorded, record, "env_id")
         # Options saved by earlier versions (e.g. the shipped trigger's posture_target) read as now.
         self.env_options = translate_legacy_options(self.saved.get("env_options", {}))
+        self._check_option_names()
         self.residual_scale = float(self.saved.get("residual_scale", 0.0))
         for mode in ("residual_until_held", "residual_approach_only"):
             if self.saved.get(mode):
@@ -444,6 +461,7 @@ class PolicyActor:
         observation is not the one the policy was trained on."""
         from sms3d_env.training.envs import make_env
 
+        self._check_no_conflict(kwargs)
         env = make_env(self.env_id, self.residual_scale, self.residual_descend_trigger,
                        residual_trigger_only=self.residual_trigger_only,
                        **{**kwargs, **self.env_options})
@@ -453,6 +471,29 @@ class PolicyActor:
             env.close()
             raise
         return env
+
+    def _check_option_names(self) -> None:
+        """Saved env options are arguments of the env, nothing else ``gym.make`` takes (a
+        ``max_episode_steps`` there would cut every episode the caller runs)."""
+        from sms3d_env.pick_env import SMS3DPickEnv
+
+        arguments = set(inspect.signature(SMS3DPickEnv.__init__).parameters) - {"self", "render_mode"}
+        unknown = sorted(set(self.env_options) - arguments)
+        if unknown:
+            raise PolicyFileError(self.config_path or self.path,
+                                  f"env_options: {', '.join(map(repr, unknown))} are no arguments of the env "
+                                  f"({', '.join(sorted(arguments))})")
+
+    def _check_no_conflict(self, kwargs: dict[str, Any]) -> None:
+        """The options the policy was trained with win over ``kwargs``; one that says otherwise
+        is refused by name (applying either would run another env than the caller reports)."""
+        conflicts = [f"{name}={_plain(kwargs[name])!r} (trained with {_plain(saved)!r})"
+                     for name, saved in self.env_options.items()
+                     if name in kwargs and _plain(kwargs[name]) != _plain(saved)]
+        if conflicts:
+            where = self.config_path or self.path
+            raise PolicyFileError(where, f"the policy was trained with env options that the command contradicts: "
+                                         f"{'; '.join(conflicts)}; leave those out or set them as trained")
 
     def _check_observation(self, space: Any) -> None:
         """``space`` (the env's dict observation) has the keys and sizes the policy was trained on."""

@@ -297,3 +297,33 @@ def test_the_suggested_record_command_survives_quotes_and_runs_nothing_else(tmp_
     assert result.returncode == 0, result.stderr[-2000:]
     assert not list(tmp_path.glob("MARKER*")) and not list(folder.glob("MARKER*"))
     assert load_sb3(folder / "model.zip", ("ppo",)).observation_space.shape == (3,)
+
+
+def test_a_command_contradicting_the_options_a_policy_was_trained_with_is_refused_by_name():
+    """The shipped trigger was trained on the Jaco: a sweep asking for the gantry ran the Jaco and
+    labelled every row gantry. Options the command repeats as trained pass."""
+    from generator import SceneConfig
+    from sms3d_env.training.actor import SHIPPED_TRIGGER
+    from sms3d_env.training.model_files import PolicyFileError
+
+    actor = PolicyActor(SHIPPED_TRIGGER)
+    with pytest.raises(PolicyFileError, match=r"robot='gantry' \(trained with 'jaco'\)"):
+        actor.make_env(robot="gantry")
+    env = actor.make_env(robot="jaco", task_obs=True, scene=SceneConfig().replace(placement__num_mushrooms=5))
+    assert env.unwrapped.robot_cfg.name == "jaco"
+    env.close()
+
+
+def test_saved_env_options_that_are_no_env_arguments_are_refused_naming_the_file(tmp_path):
+    import shutil
+
+    from sms3d_env.training.actor import SHIPPED_POLICY
+    from sms3d_env.training.model_files import PolicyFileError
+
+    for name in ("model.zip", "config.json"):
+        shutil.copy(SHIPPED_POLICY.parent / name, tmp_path / name)
+    config = json.loads((tmp_path / "config.json").read_text())
+    config["env_options"]["max_episode_steps"] = 1  # would cut every episode to one step
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    with pytest.raises(PolicyFileError, match=r"config.json.*'max_episode_steps' are no arguments of the env"):
+        PolicyActor(tmp_path / "model.zip")
