@@ -87,8 +87,8 @@ def _cmd_record(args: Any) -> int:
             check_recordable,
             dataset_path,
             datasets_root,
-            delete_dataset,
             record_datasets,
+            replacing_dataset,
         )
 
         dataset_id = check_dataset_id(args.dataset_id)
@@ -102,13 +102,13 @@ def _cmd_record(args: Any) -> int:
     except (ValueError, TypeError, FileNotFoundError, ImportError) as e:  # PolicyFileError, DatasetError too
         print(f"error: {e}")
         return 2
-    if args.overwrite:
-        delete_dataset(dataset_id)
     seeds = range(args.seed, args.seed + args.episodes)
     recording = {"picker": spec.label, "made_by": "sms3d record-demos"}
     try:
-        dataset, = record_datasets([(dataset_id, env)], make_expert, seeds, recording,
-                                   action_noise=args.action_noise, desc=f"record-demos {dataset_id}")
+        # With --overwrite the earlier dataset stays until the new one is complete.
+        with replacing_dataset(dataset_id):
+            dataset, = record_datasets([(dataset_id, env)], make_expert, seeds, recording,
+                                       action_noise=args.action_noise, desc=f"record-demos {dataset_id}")
     except ValueError as e:  # DatasetError: the env cannot be recorded
         print(f"error: {e}")
         return 2

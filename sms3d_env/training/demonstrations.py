@@ -379,6 +379,38 @@ def record_datasets(targets: Sequence[tuple[str, gym.Env]], make_expert: Callabl
         shutil.rmtree(temp_path(root / RECORDING_CACHE), ignore_errors=True)
 
 
+#: Where ``replacing_dataset`` keeps the dataset an overwrite replaces until the new one is
+#: complete (under :func:`datasets_root`); a recording killed meanwhile leaves it there.
+REPLACED_FOLDER = ".replaced"
+
+
+@contextlib.contextmanager
+def replacing_dataset(dataset_id: str) -> Iterator[None]:
+    """Record ``dataset_id`` anew without losing the one it replaces if the recording fails: the
+    old folder is moved aside (``REPLACED_FOLDER``) for the block, deleted when the block ends
+    normally, moved back when it raises (an interrupt included). Never a namespace's folder."""
+    check_not_namespace(dataset_id)
+    folder = dataset_path(dataset_id)
+    if not folder.exists():
+        yield
+        return
+    aside = temp_path(datasets_root() / REPLACED_FOLDER / dataset_id)
+    aside.parent.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(aside, ignore_errors=True)
+    folder.rename(aside)
+    try:
+        yield
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)  # what the failed recording left
+        aside.rename(folder)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
+    for parent in aside.parents:  # the empty folders it was kept in
+        if parent == datasets_root() or any(parent.iterdir()):
+            break
+        parent.rmdir()
+
+
 def delete_dataset(dataset_id: str) -> None:
     """Remove ``dataset_id``'s folder under :func:`datasets_root` (a complete dataset or what a
     cut recording left); never a namespace's, which holds other datasets (``DatasetError``,

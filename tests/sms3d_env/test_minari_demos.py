@@ -316,3 +316,18 @@ def test_every_record_argument_has_a_json_form_that_rebuilds_the_same_env():
     finally:
         env.close()
         rebuilt.close()
+
+
+def test_an_overwrite_that_fails_keeps_the_dataset_it_was_to_replace(minari_root, monkeypatch):
+    from sms3d_env.training import demonstrations
+
+    def cut_short(specs, *args, **kwargs):
+        (demonstrations.dataset_path(specs[0][0]) / "data").mkdir(parents=True)  # a partial recording
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(demonstrations, "record_datasets", cut_short)
+    with pytest.raises(KeyboardInterrupt):
+        main(["record-demos", "--dataset-id", DATASET, "--episodes", "1", "--num-mushrooms", "5", "--overwrite"])
+    assert minari.load_dataset(DATASET).total_episodes == 3
+    assert not (minari_root / demonstrations.REPLACED_FOLDER).exists() or not any(
+        (minari_root / demonstrations.REPLACED_FOLDER).rglob("*-v0*"))
