@@ -164,7 +164,12 @@ class SMS3DPickEnv(gym.Env):
       per 2 ms step, one step's load peak when a root let go decided picks, and the outcome
       depended on the step size. The constructor's arguments were regrouped into 16, the options of one concern
       in one record (``scene``, ``target``, ``reward_type``, ``controller``, ``start``,
-      ``image_obs``, ``render_camera``); the same ids make the same episodes.
+      ``image_obs``, ``render_camera``); the same ids make the same episodes. ``step()`` after
+      the episode ended returns its last outcome with no reward (it simulated on, and ``info``
+      turned into a ``timeout`` failure); ``SMS3DPickEnv()`` and ``robot=None`` are the gantry
+      (they were v0's Jaco). The physics options of the coming v2 (``PickPhysicsParams``
+      ``lip_seal``, ``mushrooms_collide``, ``slip_bruising``, ``clean_pick``; the
+      ``"harvest_ready"`` target) are off in v1.
     - v0: the Jaco beside the bed below the soil line; its base, shoulder, upper arm, forearm and
       first wrist link collide with nothing, and only the mushrooms within 10 cm of the target
       collide with anything (``free_radius=0.10``, :func:`make_v0_env`); 20 physics steps of
