@@ -194,17 +194,15 @@ def approach_blocked(insts: Any) -> np.ndarray:
     down each mushroom's stem axis from ``APPROACH_HEIGHT`` above its cap top: a neighbour whose
     cap top stands above the target's cap top along that axis, its cap's edge within the
     cylinder's radius of the axis."""
-    blocked = np.zeros(len(insts), bool)
-    for i, inst in enumerate(insts):
-        top, axis = np.asarray(inst.cap_top, float), np.asarray(inst.rotation)[:, 2]
-        for j, other in enumerate(insts):
-            rel = np.asarray(other.cap_top, float) - top
-            along = float(rel @ axis)
-            lateral = float(np.linalg.norm(rel - along * axis))
-            if j != i and 0.0 < along < APPROACH_HEIGHT and lateral - other.cap_diameter / 2 < APPROACH_RADIUS:
-                blocked[i] = True
-                break
-    return blocked
+    tops = np.array([inst.cap_top for inst in insts], float).reshape(-1, 3)
+    axes = np.array([np.asarray(inst.rotation)[:, 2] for inst in insts], float).reshape(-1, 3)
+    radii = np.array([inst.cap_diameter / 2 for inst in insts], float)
+    rel = tops[None] - tops[:, None]  # [i, j]: neighbour j's cap top from mushroom i's
+    along = np.einsum("ijk,ik->ij", rel, axes)
+    lateral = np.linalg.norm(rel - along[..., None] * axes[:, None], axis=2)
+    reaches = (along > 0.0) & (along < APPROACH_HEIGHT) & (lateral - radii[None] < APPROACH_RADIUS)
+    np.fill_diagonal(reaches, False)
+    return reaches.any(axis=1)
 
 
 def target_classes(insts: Any, harvest_diameter: float = HARVEST_DIAMETER) -> dict[str, np.ndarray]:

@@ -206,8 +206,9 @@ def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | 
     n = len(scene.instances)
     free = free_set(scene, target, free_radius)
     suction = robot.tool == "suction"
+    compiled = cache is None or cache_key is None or cache_key not in cache
     if cache is not None and cache_key is not None:
-        if cache_key not in cache:
+        if compiled:
             cache[cache_key] = world_spec(scene, free, robot, timestep).compile()
         m = copy.copy(cache[cache_key])
     else:
@@ -248,9 +249,11 @@ def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | 
     cup_geom = m.geom(prefix + CUP_GEOM).id if suction else -1  # -1: the seal test never fires
     force, torque = m.sensor(prefix + WRIST_FORCE), m.sensor(prefix + WRIST_TORQUE)
     socket = 0 if suction else ph.SOCKET_CONAFFINITY
-    if mushrooms_collide:
+    if mushrooms_collide and compiled:  # a cached model's bed passed when it was compiled
         overlaps = interpenetrating_mushrooms(m, geom_mushroom)
         if overlaps:
+            if cache is not None:
+                cache.pop(cache_key, None)  # refused again at its next draw, not passed as checked
             (i, j), depth = overlaps[0]
             raise ValueError(f"the bed's mushrooms {i} and {j} interpenetrate by {depth * 1000:.1f} mm at rest "
                              f"({len(overlaps)} pairs deeper than {ph.MAX_REST_PENETRATION * 1000:g} mm): with "

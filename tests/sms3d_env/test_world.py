@@ -96,3 +96,13 @@ def test_a_bed_whose_mushrooms_interpenetrate_is_refused_when_they_collide():
     env = _colliding_env(25, overlap_iou=0.05)  # the paper's placement lets volumes overlap by 5 %
     with pytest.raises(ValueError, match=r"interpenetrate by .* mm at rest.*overlap_iou = 0"):
         env.reset(seed=1_000_000)
+
+
+def test_a_pool_bed_that_interpenetrates_is_refused_at_every_draw_not_only_the_first():
+    from sms3d_env.physics_params import PickPhysicsParams
+
+    bed = {"config": {"placement": {"num_mushrooms": 25}}, "pool": 1}  # the paper's 5 % overlap
+    env = gym.make("SMS3DPick-v1", scene=bed, physics=PickPhysicsParams(mushrooms_collide=True))
+    for seed in (0, 1):
+        with pytest.raises(ValueError, match="interpenetrate"):
+            env.reset(seed=seed)
