@@ -120,7 +120,11 @@ class PlacementConfig:
     stretch_range: tuple[float, float] = (0.9, 1.1)  # per-axis epsilon in the mushroom frame
     max_attempts: int = 100  # M
     overlap_iou: float = 0.05  # tau
-    neighbours: int = 5  # k nearest placed mushrooms checked
+    neighbours: int = 5  # k nearest placed mushrooms checked (with "meshes")
+    # "meshes": the paper's IoU of the meshes; "hulls": of the convex hulls of cap and stem that
+    # MuJoCo collides, against every mushroom whose bounding sphere touches (with overlap_iou = 0,
+    # a bed whose collision shapes do not interpenetrate at rest).
+    overlap_solids: Literal["meshes", "hulls"] = "meshes"
     insertion_depth: float = 0.002  # m, stem base sunk below the soil surface
 
     def __post_init__(self) -> None:
@@ -140,6 +144,8 @@ class PlacementConfig:
         if not 0 <= self.overlap_iou <= 1:
             raise ConfigError("placement.overlap_iou", f"must be in [0, 1], got {self.overlap_iou!r}")
         require_int("placement.neighbours", self.neighbours, 1, 100)  # more than num_mushrooms can hold
+        if self.overlap_solids not in ("meshes", "hulls"):
+            raise ConfigError("placement.overlap_solids", f"must be meshes or hulls, got {self.overlap_solids!r}")
         _require_finite("placement.insertion_depth", self.insertion_depth)
         if not 0 <= self.insertion_depth <= 0.02:
             raise ConfigError("placement.insertion_depth", "must be in [0, 0.02] m")

@@ -119,11 +119,13 @@ def _proxy(model: MushroomModel, exact: manifold3d.Manifold, outer: bool) -> man
 
 @dataclass(frozen=True)
 class Solid:
-    """A model as manifolds (exact, inner and outer proxy) with its bounding sphere and volume."""
+    """A model as manifolds (exact, inner and outer proxy, and ``hulls``: the convex hulls of its
+    cap and of its stem, the shapes MuJoCo collides) with its bounding sphere and volume."""
 
     exact: manifold3d.Manifold
     inner: manifold3d.Manifold | None
     outer: manifold3d.Manifold | None
+    hulls: manifold3d.Manifold
     centre: np.ndarray  # bounding-box centre, model frame
     radius: float
     volume: float
@@ -136,7 +138,9 @@ def model_solid(species: Species, model_id: int) -> Solid:
     lo, hi = model.mesh.bounds
     centre = (lo + hi) / 2
     radius = float(np.linalg.norm(model.mesh.vertices - centre, axis=1).max())
-    return Solid(exact, _proxy(model, exact, outer=False), _proxy(model, exact, outer=True), centre, radius,
+    hulls = (_mesh_to_manifold(model.cap_mesh.vertices, model.cap_mesh.faces).hull()
+             + _mesh_to_manifold(model.stem_mesh.vertices, model.stem_mesh.faces).hull())
+    return Solid(exact, _proxy(model, exact, outer=False), _proxy(model, exact, outer=True), hulls, centre, radius,
                  float(exact.volume()))
 
 
@@ -160,7 +164,7 @@ class Posed:
                    solid.volume * float(np.prod(scale_vector)))
 
     def manifold(self, kind: str) -> manifold3d.Manifold:
-        """The ``exact``, ``inner`` or ``outer`` manifold in the world."""
+        """The ``exact``, ``inner``, ``outer`` or ``hulls`` manifold in the world."""
         if kind not in self._moved:
             self._moved[kind] = getattr(self.solid, kind).transform(self.affine)
         return self._moved[kind]
@@ -181,8 +185,19 @@ class OverlapCounts:
     bounds: int = 0
 
 
-def exceeds_iou(candidate: Posed, neighbours: Sequence[Posed], tau: float, counts: OverlapCounts) -> bool:
-    """Whether the exact IoU of ``candidate`` with any of ``neighbours`` exceeds ``tau``."""
+def exceeds_iou(candidate: Posed, neighbours: Sequence[Posed], tau: float, counts: OverlapCounts,
+                solids: str = "meshes") -> bool:
+    """Whether the exact IoU of ``candidate`` with any of ``neighbours`` exceeds ``tau``: of their
+    meshes (``solids="meshes"``, the paper's test) or of their collision hulls (``"hulls"``:
+    the cap's and the stem's convex hulls, which fill the hollow under the cap)."""
+    if solids == "hulls":
+        mine = candidate.manifold("hulls")
+        for other in neighbours:
+            counts.exact += 1
+            theirs = other.manifold("hulls")
+            if intersection_iou(mine, theirs, mine.volume(), theirs.volume()) > tau:
+                return True
+        return False
     depth = [float(np.linalg.norm(n.centre - candidate.centre)) / (n.radius + candidate.radius) for n in neighbours]
     for j in sorted(range(len(neighbours)), key=depth.__getitem__):
         other = neighbours[j]

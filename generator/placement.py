@@ -3,7 +3,9 @@
 For each requested mushroom, up to ``max_attempts`` times: pick a model, sample a position,
 roll/pitch ~ N(0, sigma^2), yaw ~ U[0, 2 pi), ``R = Rz Ry Rx``, uniform scale and per-axis
 stretch; set the stem base on the soil; reject when the intersection-over-union with one of the
-``neighbours`` nearest placed mushrooms whose bounding spheres touch it exceeds ``overlap_iou``.
+``neighbours`` nearest placed mushrooms whose bounding spheres touch it exceeds ``overlap_iou``
+(of their meshes, the paper's test, or with ``overlap_solids="hulls"`` of the convex hulls of cap
+and stem that MuJoCo collides).
 Intersection volumes are exact mesh booleans (manifold3d), spared where certain bounds already
 decide (``generator.overlap``).
 """
@@ -94,8 +96,10 @@ def place_mushrooms(
             touching = [placed[i] for i in near
                         if np.linalg.norm(placed[i][1].centre - posed.centre) < placed[i][1].radius + posed.radius]
             touching.sort(key=lambda p: float(np.linalg.norm(p[0].stem_base - stem_base)))
-            neighbours = [p[1] for p in touching[: config.neighbours]]
-            if not exceeds_iou(posed, neighbours, config.overlap_iou, counts):
+            # The hull test is the physics' (every touching neighbour); the paper's, the k nearest.
+            kept = touching if config.overlap_solids == "hulls" else touching[: config.neighbours]
+            neighbours = [p[1] for p in kept]
+            if not exceeds_iou(posed, neighbours, config.overlap_iou, counts, config.overlap_solids):
                 centres[n], radii[n] = posed.centre, posed.radius
                 placed.append((candidate, posed))
                 break

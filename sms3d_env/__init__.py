@@ -1,12 +1,14 @@
-"""Gymnasium environments for robotic mushroom picking (``SMS3DPick-v1``, ``SMS3DPickTrain-v1``:
-the learnable training options; the superseded ``-v0`` ids with the Jaco whose links partly
-collide with nothing)."""
+"""Gymnasium environments for robotic mushroom picking (``SMS3DPick-v2``, ``SMS3DPickTrain-v2``:
+the learnable training options; the superseded ``-v1`` ids, whose picking model's rules rather
+than the mushroom set the outcome, and ``-v0`` ids, with the Jaco whose links partly collide with
+nothing)."""
 
 # Importing generator first sets the headless rendering default (MUJOCO_GL=egl) before anything
 # imports mujoco.
 from gymnasium.envs.registration import register, registry
 
 from generator.lazy import lazy_exports
+from sms3d_env.physics_params import V1_PHYSICS
 
 #: Public names and the submodules that define them; loaded on first access (PEP 562) so that
 #: ``sms3d --help`` and the light submodules (the sweep's and training's parsers) do not pay for
@@ -34,16 +36,17 @@ __all__ = sorted(_EXPORTS)
 TRAIN_OPTIONS = {"reward_type": "staged", "suction_mode": "latched", "end_on_dead_end": True,
                  "task_obs": True}
 
-#: What SMS3DPick-v1 changes from v0 (see ``SMS3DPickEnv``'s version history): an honest robot,
-#: every mushroom colliding (the env's defaults; v0's entry point ``make_v0_env`` frees only the
-#: mushrooms near the target).
-V1_OPTIONS = {"robot": "gantry"}
+#: ``SMS3DPick-v1``'s options where they differ from v2's (the env's defaults; see
+#: ``SMS3DPickEnv``'s version history): v1's picking model and the tallest reachable target.
+V1_OPTIONS = {"robot": "gantry", "physics": V1_PHYSICS, "target": "tallest"}
 
 for _id, _entry, _kw in (("SMS3DPick-v0", "make_v0_env", {"reward_type": "dense"}),
                          ("SMS3DPickSparse-v0", "make_v0_env", {"reward_type": "sparse"}),
                          ("SMS3DPickTrain-v0", "make_v0_env", TRAIN_OPTIONS),
                          ("SMS3DPick-v1", "SMS3DPickEnv", {"reward_type": "dense", **V1_OPTIONS}),
-                         ("SMS3DPickTrain-v1", "SMS3DPickEnv", {**TRAIN_OPTIONS, **V1_OPTIONS})):
+                         ("SMS3DPickTrain-v1", "SMS3DPickEnv", {**TRAIN_OPTIONS, **V1_OPTIONS}),
+                         ("SMS3DPick-v2", "SMS3DPickEnv", {}),
+                         ("SMS3DPickTrain-v2", "SMS3DPickEnv", TRAIN_OPTIONS)):
     if _id not in registry:
         register(id=_id, entry_point=f"sms3d_env.pick_env:{_entry}", max_episode_steps=250, kwargs=_kw)
 

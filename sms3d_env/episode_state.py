@@ -34,4 +34,6 @@ class EpisodeState:
     closest_approach: float = np.inf  # the tool site's least distance to the target's cap top (m)
     root_util: float = 0.0  # target root load / capacity, largest in this control step (reward only)
     seal_step: int = -1  # control step at which the current seal formed (-1: none)
+    grip_step: int = -1  # control steps until the target was first held (-1: not yet)
+    detach_step: int = -1  # control steps until the target's root let go (-1: not yet)
     seal_tool_x: np.ndarray | None = None  # tool x axis (world) when it formed

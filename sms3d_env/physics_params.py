@@ -7,7 +7,11 @@ They live here, not in :mod:`sms3d_env.physics` (which imports them from this mo
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
+
+from sms3d_env.records import record_of
 
 
 @dataclass(frozen=True)
@@ -16,17 +20,21 @@ class PickPhysicsParams:
 
     Attributes:
         pull_force: axial tension at the root that detaches a mushroom (N). ASSUMPTION (no source
-            for pull-off force): above the suction holding force, so a straight pull loses the
-            grip first, as "twist, do not pull" and every documented method imply.
+            for a pull-off force): 8 N, 2.5x the 3.2 N of shear Xu et al. 2025 measured to grip
+            and twist, as pickers are told to twist, not pull; the study sweeps it.
         bend_moment: bending moment at the root that detaches (N m). ASSUMPTION (no source):
             about 2 N of side force on a cap 4 cm above the root, 8x what gravity gives a 50 g
             mushroom tilted by 30 degrees. It exceeds the seal's bending capacity (holding force
             x a / 2 = 0.031 N m), so bending alone loses the grip before it detaches, as the
             twist-first methods in docs/physics.md imply. (0.02 N m, the earlier value, is
             0.5 N at the cap: a cup's approach alone uprooted mushrooms.)
-        twist_torque: torque about the stem that detaches (N m). ASSUMPTION (no source); twisting
-            detaches most easily, as pickers are told ("twist, do not pull").
-        vacuum: suction vacuum (Pa), 20 kPa as in docs/physics.md.
+        twist_torque: torque about the stem that detaches (N m). Xu et al. 2025: more than 3.2 N
+            of shear grips and twists a mushroom, 0.02-0.1 N m at a grip radius of 7-30 mm;
+            0.03 N m, the lower part of that range, is an ASSUMPTION within it (v1: 0.006, a
+            fifth of the range's bottom). Twisting detaches most easily ("twist, do not pull").
+        vacuum: suction vacuum (Pa): 60 kPa, the relative vacuum at which suction cups' holding
+            forces are stated (Schmalz); ASSUMPTION for a harvester (none publishes its vacuum;
+            Penn State's cup adjusts it). v1: 20 kPa.
         cup_radius: cup radius (m), 10 mm (a 20 mm cup) as in docs/physics.md.
         seal_angle_deg: largest angle between the cup axis and the cap surface normal at the
             contact that still seals. ASSUMPTION: a 10 mm cup tilted 20 degrees lifts one rim edge
@@ -35,8 +43,9 @@ class PickPhysicsParams:
             axis (the cap top, not its softer, curved rim). ASSUMPTION.
         seal_force: cup-on-cap normal force needed to form a seal (N). ASSUMPTION.
         shear_friction: shear capacity of the seal as a fraction of its normal force (the
-            holding force, plus the cup's pressing force with ``seal_preload``). ASSUMPTION
-            (rubber on a moist cap).
+            holding force, plus the cup's pressing force with ``seal_preload``): 0.3, the top of
+            Schmalz's reference friction coefficient for suction cups on wet surfaces (0.2-0.3;
+            a cap is moist). v1: 0.5 (ASSUMPTION, rubber on a moist cap).
         bruise_force: cap contact normal force that bruises (N). ASSUMPTION: docs/physics.md
             reports no numeric bruising threshold.
         disturb_tolerance: a neighbour moved further than this (m) counts as disturbed. ASSUMPTION.
@@ -86,6 +95,21 @@ class PickPhysicsParams:
             interpenetrate at rest (more than 1 mm): generated beds need
             ``placement.overlap_iou = 0``; a bed that does is refused at reset. False: mushrooms
             touch only the robot and the soil (v0, v1).
+        compliant_root: the root bends and twists before it lets go (:mod:`sms3d_env.roots`): a
+            ball constraint at the stem base, rotational springs that reach ``bend_moment`` after
+            ``bend_angle_deg`` of bending and ``twist_torque`` after ``twist_angle_deg`` of twist,
+            and the same failure rule (``physics.root_utilisation``). False: a stiff weld that
+            lets go at those loads after a fraction of a degree (v0, v1).
+        bend_angle_deg: bending of the stem at its base (deg) when the bending moment reaches
+            ``bend_moment`` (with ``compliant_root``). ASSUMPTION (no published bend angle at
+            detachment): 15 degrees, the "bend into free space" of the Silsoe picker before its
+            twist, short of the 30-45 degrees after which a stem snaps.
+        twist_angle_deg: twist of the stem (deg) when the torque reaches ``twist_torque`` (with
+            ``compliant_root``). ASSUMPTION (no published twist angle at detachment): 30 degrees,
+            a wrist's "gentle twist" of a twelfth of a turn.
+        root_damping_ratio: damping of the root springs as a fraction of critical (each
+            mushroom's own inertia about its stem base). ASSUMPTION: 0.5, plant tissue that does
+            not ring after a push.
         clean_pick: success needs a clean pick, as a grower judges it: besides the target picked
             unbruised, no neighbour moved further than ``disturb_tolerance`` or knocked off its
             roots (``info["neighbours_disturbed"]``; ``info["target_picked"]`` says whether the
@@ -94,26 +118,30 @@ class PickPhysicsParams:
 
     pull_force: float = 8.0
     bend_moment: float = 0.08
-    twist_torque: float = 0.006
-    vacuum: float = 20e3
+    twist_torque: float = 0.03
+    vacuum: float = 60e3
     cup_radius: float = 0.010
     seal_angle_deg: float = 20.0
     seal_region: float = 0.5
     seal_force: float = 0.3
-    shear_friction: float = 0.5
+    shear_friction: float = 0.3
     bruise_force: float = 25.0
     disturb_tolerance: float = 0.005
     lift_height: float = 0.03
     settle_time: float = 0.1
     seal_response_time: float = 0.02
     seal_preload: bool = True
-    lip_seal: bool = False
+    lip_seal: bool = True
     lip_compliance: float = 0.005
     lip_points: int = 16
     evacuation_time: float = 0.05
-    clean_pick: bool = False
-    mushrooms_collide: bool = False
-    slip_bruising: bool = False
+    clean_pick: bool = True
+    compliant_root: bool = True
+    bend_angle_deg: float = 15.0
+    twist_angle_deg: float = 30.0
+    root_damping_ratio: float = 0.5
+    mushrooms_collide: bool = True
+    slip_bruising: bool = True
     slip_bruise_work: float = 0.005
 
     def __post_init__(self) -> None:
@@ -122,6 +150,9 @@ class PickPhysicsParams:
                 raise ValueError(f"PickPhysicsParams.{name} must be a finite number >= 0, got {value!r}")
         if not 0 < self.seal_angle_deg < 90:
             raise ValueError("PickPhysicsParams.seal_angle_deg must be in (0, 90)")
+        for name in ("bend_angle_deg", "twist_angle_deg"):
+            if not 0 < getattr(self, name) < 180:
+                raise ValueError(f"PickPhysicsParams.{name} must be in (0, 180) degrees, got {getattr(self, name)!r}")
         if self.lip_points < 3 or self.lip_points != int(self.lip_points):
             raise ValueError(f"PickPhysicsParams.lip_points must be an integer >= 3, got {self.lip_points!r}")
 
@@ -129,3 +160,24 @@ class PickPhysicsParams:
     def holding_force(self) -> float:
         """Suction holding force = vacuum x cup area (N); 6.3 N with the defaults."""
         return self.vacuum * math.pi * self.cup_radius**2
+
+
+#: ``SMS3DPick-v1``'s picking model (its registration's ``physics``): the one-contact seal, a stiff
+#: weld for a root, mushrooms that pass through each other, pressure bruising only, neighbours
+#: that do not count, a 20 kPa vacuum, friction 0.5, a 0.006 N m twist-off torque.
+V1_PHYSICS = {"vacuum": 20e3, "shear_friction": 0.5, "twist_torque": 0.006, "lip_seal": False,
+              "clean_pick": False, "mushrooms_collide": False, "slip_bruising": False, "compliant_root": False}
+
+
+def physics_for(physics: PickPhysicsParams | Mapping[str, Any] | None, cup_radius: float) -> PickPhysicsParams:
+    """The env's ``physics`` argument as a record: a record as given; its mapping form (field
+    name -> value; a key that is no field is refused by name) or None with the defaults for the
+    rest, the cup radius the robot's unless given."""
+    if isinstance(physics, PickPhysicsParams):
+        return physics
+    if physics is None:
+        return PickPhysicsParams(cup_radius=cup_radius)
+    if not isinstance(physics, Mapping):
+        raise TypeError(f"physics must be a PickPhysicsParams, its mapping form or None, got "
+                        f"{type(physics).__name__} {physics!r}")
+    return record_of(PickPhysicsParams, {"cup_radius": cup_radius, **physics}, "physics")

@@ -1,4 +1,4 @@
-"""``SMS3DPick-v1``: pick one mushroom from a synthetic bed with a Cartesian gantry harvester or
+"""``SMS3DPick-v2``: pick one mushroom from a synthetic bed with a Cartesian gantry harvester or
 a Kinova Jaco, by a suction tool (default) or the Jaco 3-finger hand.
 
 The env holds the gym API only: spaces, reset/step, observation, reward assembly and rendering.
@@ -29,7 +29,7 @@ from generator.gl import open_renderer
 from sms3d_env.cameras import ImageObservation, RenderCamera
 from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.env_args import RENDER_MODES, SUCTION_MODES, check_env_args, pose_error_of
-from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.physics_params import PickPhysicsParams, physics_for
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
 from sms3d_env.pose_sources import PoseSource, make_pose_source
 from sms3d_env.posture import IKPosture
@@ -115,7 +115,9 @@ class SMS3DPickEnv(gym.Env):
     ``reachable``, ``gripped``, ``gripped_target``, ``target_detached``, ``bruised``,
     ``neighbours_disturbed``, ``lift``, ``unstable_simulation`` (the picking model's
     ``evaluate()``), ``start`` (``"home"``, or ``"pregrasp"`` for a ``PregraspStart`` reset),
-    ``time_s`` (simulated seconds since reset; at success, the pick's cycle time), plus the
+    ``time_s`` (simulated seconds since reset; at success, the pick's cycle time),
+    ``time_gripped_s`` and ``time_detached_s`` (when the target was first held and when its root
+    let go; None before: the cycle's phases whatever the policy), plus the
     staged reward's terms. ``failure_cause="not_reached"``: the tool never came within 1 cm of
     the target's true cap top (the approach stopped short); ``"no_seal"``: it did, and no seal
     formed.
@@ -132,11 +134,11 @@ class SMS3DPickEnv(gym.Env):
     | ``robot`` | ``str``, ``GantryConfig``, ``RobotConfig`` or None | ``"gantry"`` | ``"gantry"`` (the Cartesian harvester of :mod:`sms3d_env.gantry`) or ``"jaco"`` (the Kinova Jaco hanging above the bed), or a robot config; every link of either collides with the soil and the mushrooms. None: the default, ``"gantry"`` |
     | ``tool`` | ``str`` or None | None | ``"suction"`` or ``"hand"``; overrides the robot's tool (default: ``"suction"``) |
     | ``scene`` | ``SceneSourceConfig``, ``generator.SceneConfig``, a list of ``generator.Scene``, a dataset folder, or None | None | where each reset's bed comes from and which mushrooms can move (:class:`~sms3d_env.scene_source.SceneSourceConfig`: generated beds, a fixed list, a pool, ``free_radius``). A ``SceneConfig`` (or its mapping form, e.g. ``{"placement": {"num_mushrooms": 10}}``): a new bed of it per reset; scenes or a ``sms3d generate`` folder (checksums verified): one drawn per reset (``options={"scene": k}``); None: a new 25-mushroom bed per reset, every mushroom free |
-    | ``target`` | ``str`` or ``TargetRule`` | ``"tallest"`` | which mushroom is picked (:class:`~sms3d_env.targets.TargetRule`: ``"tallest"``, ``"largest"``, ``"random"``, ``"index"`` with its ``index``, ``max_tilt_deg``; drawn uniformly within a class: ``"harvest_ready"`` (a cap of at least ``harvest_diameter``, 50 mm), ``"isolated"``, ``"crowded"``, ``"approach_blocked"``, ``"small"``); ``options={"target": i}`` picks mushroom ``i`` for one reset |
+    | ``target`` | ``str`` or ``TargetRule`` | ``"harvest_ready"`` | which mushroom is picked (:class:`~sms3d_env.targets.TargetRule`), drawn uniformly within a class: ``"harvest_ready"`` (a reachable cap of at least ``harvest_diameter``, 50 mm: what a farm picks now), ``"isolated"``, ``"crowded"``, ``"approach_blocked"``, ``"small"``; or ``"tallest"`` (v1's), ``"largest"``, ``"random"``, ``"index"`` with its ``index``; ``max_tilt_deg``; ``options={"target": i}`` picks mushroom ``i`` for one reset |
     | ``pose_source`` | ``str`` or ``PoseSource`` | ``"oracle"`` | the target estimate in the observation: ``"oracle"``, ``"noisy"``, ``"perception"`` or a callable ``(scene, id, rng) -> PoseEstimate`` (e.g. ``NoisyPose(error_deg, position_std=0.002)``, ``PerceptionPose(detector=...)``) |
     | ``pose_error_deg`` | ``float`` or ``(low, high)`` | 0.0 | the ``"noisy"`` source's rotation error (deg), or a pair: drawn per episode uniformly in it (``UniformNoisyPose``); refused with any other source |
     | ``reward_type`` | ``str`` or ``RewardConfig`` | ``"dense"`` | ``"dense"``, ``"sparse"`` or ``"staged"``, or :class:`~sms3d_env.rewards.RewardConfig` (``kind``, the staged reward's ``horizon``) |
-    | ``physics`` | ``PickPhysicsParams`` or None | None | the picking model's numbers (None: the defaults, the robot's cup radius) |
+    | ``physics`` | ``PickPhysicsParams``, its mapping form or None | None | the picking model: the cup (``vacuum``, ``cup_radius``, ``lip_compliance``, ``evacuation_time``), the root (``pull_force``, ``bend_moment``, ``twist_torque`` and the angles they are reached at), bruising, what a clean pick is (None or fields left out: the defaults, the robot's cup radius); ``SMS3DPick-v1``'s is ``V1_PHYSICS`` |
     | ``controller`` | ``ControllerConfig`` or None | None | :class:`~sms3d_env.controller.ControllerConfig`: control period and physics substeps, the IK's speeds and weights, and its posture target (``posture_target``, :mod:`sms3d_env.posture`) |
     | ``start`` | ``PregraspStart`` or None | None | where the arm starts (:mod:`sms3d_env.start_states`): None at home; ``PregraspStart(share)`` that share of resets on the way to a pre-grasp pose (a reverse curriculum; ``set_pregrasp_start`` changes the share between episodes) |
     | ``suction_mode`` | ``str`` | ``"momentary"`` | ``"momentary"`` (any command <= 0 releases the seal) or ``"latched"`` (the vacuum valve holds its state: once a seal forms it stays on whatever the command, as a picker's valve does after its vacuum switch trips) |
@@ -149,6 +151,20 @@ class SMS3DPickEnv(gym.Env):
     ``reward_type="staged"``, ``end_on_dead_end=True``, ``task_obs=True``.
 
     ## Version history
+    - v2: the outcome is set by the mushroom and the cup, not by the simulator's rules
+      (``PickPhysicsParams``). The seal is judged on the cup's whole lip (``lip_seal``: every lip
+      point over the target's cap within the lip's compliance, 5 mm), and its holding force rises
+      over the vacuum's evacuation time; the root bends and twists before it lets go
+      (``compliant_root``: a ball constraint at the stem base and springs reaching their limits
+      after 15 deg of bend and 30 deg of twist); every mushroom collides with every other
+      (``mushrooms_collide``; generated beds are placed so that no two collision hulls
+      interpenetrate, ``placement.overlap_solids="hulls"``, ``overlap_iou=0``); a cap also
+      bruises by slip-shear (``slip_bruising``); success is a clean pick (``clean_pick``: no
+      neighbour moved more than 5 mm or knocked off its roots), ``info["target_picked"]`` says
+      whether the target itself was; the target is drawn among the harvest-ready mushrooms
+      (``target="harvest_ready"``); the cup is rated at 60 kPa, friction 0.3 on a moist cap,
+      twist-off torque 0.03 N m (Xu et al. 2025's range). ``info`` gains ``time_gripped_s`` and
+      ``time_detached_s``. The class's defaults are v2's.
     - v1: the robot is physically honest. A Cartesian gantry harvester (``robot="gantry"``, the
       default) or a Jaco hanging above the bed with a right-angle suction adapter
       (``robot="jaco"``; its scripted picker reaches the stand-off point along a straight
@@ -185,11 +201,11 @@ class SMS3DPickEnv(gym.Env):
         robot: str | RobotSpec | None = "gantry",
         tool: str | None = None,
         scene: Any = None,
-        target: str | TargetRule | Mapping[str, Any] = "tallest",
+        target: str | TargetRule | Mapping[str, Any] = "harvest_ready",
         pose_source: str | PoseSource = "oracle",
         pose_error_deg: float | tuple[float, float] = 0.0,
         reward_type: str | RewardConfig | Mapping[str, Any] = "dense",
-        physics: PickPhysicsParams | None = None,
+        physics: PickPhysicsParams | Mapping[str, Any] | None = None,
         controller: ControllerConfig | Mapping[str, Any] | None = None,
         start: PregraspStart | Mapping[str, Any] | None = None,
         suction_mode: str = "momentary",
@@ -208,11 +224,12 @@ class SMS3DPickEnv(gym.Env):
             self.robot_cfg = replace(self.robot_cfg, tool=tool)
         self.tool = self.robot_cfg.tool
         self.render_mode = render_mode
-        self.scene_source = SceneSource(scene_source_config(scene))
+        self.params = physics_for(physics, self.robot_cfg.cup_radius)
+        touching = self.params.mushrooms_collide
+        self.scene_source = SceneSource(scene_source_config(scene, touching), touching)
         self.target_rule = record_of(TargetRule, target, "target", shorthand="rule")
         self.pose_source = make_pose_source(pose_source, pose_error_of(pose_error_deg))
         self.reward_config = record_of(RewardConfig, reward_type, "reward_type", shorthand="kind")
-        self.params = physics or PickPhysicsParams(cup_radius=self.robot_cfg.cup_radius)
         self.ctrl_cfg = ControllerConfig() if controller is None else record_of(ControllerConfig, controller,
                                                                                "controller")
         self.start = None if start is None else record_of(PregraspStart, start, "start")
@@ -288,7 +305,8 @@ class SMS3DPickEnv(gym.Env):
         ctrl = self.ctrl_cfg
         self.world = w = build_world(scene, target, self.robot_cfg, self.scene_source.config.free_radius,
                                      ctrl.control_dt / ctrl.substeps, self.scene_source.models,
-                                     self._model_key(slot, target), self.params.mushrooms_collide)
+                                     self._model_key(slot, target), self.params.mushrooms_collide,
+                                     self.params.compliant_root)
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
         self.done = False
         m, d = w.model, w.data
@@ -304,7 +322,7 @@ class SMS3DPickEnv(gym.Env):
         self.picking.settled()
         if self.render_mode == "human":
             self.render()
-        return self._obs(), {**self.picking.evaluate(), "start": self._start_label, "time_s": 0.0}
+        return self._obs(), {**self.picking.evaluate(self.control_dt), "start": self._start_label}
 
     def step(self, action: np.ndarray):
         if self.world is None:
@@ -338,16 +356,14 @@ class SMS3DPickEnv(gym.Env):
         if badqacc.number > 0 or not np.isfinite(d.qpos).all():
             ep.unstable = True
         picking.after_step()
-        info = picking.evaluate()
+        info = picking.evaluate(self.control_dt)
         terminated = (info["target_picked"] or bool(ep.bruised) or (ep.target_detached and ep.grip_lost)
                       or (self.end_on_dead_end and picking.dead_end())
                       or self.done)
         truncated = ep.unstable
         self.done = terminated or truncated
         reward, terms = self._reward(info["is_success"])
-        # time_s: simulated seconds since reset (at success, the pick's cycle time).
-        info.update({f"reward_{k}": v for k, v in terms.items()}, start=self._start_label,
-                    time_s=picking.steps * self.control_dt)
+        info.update({f"reward_{k}": v for k, v in terms.items()}, start=self._start_label)
         if ep.unstable:
             mujoco.mj_resetData(m, d)  # keep later calls finite; the episode is over
             mujoco.mj_forward(m, d)

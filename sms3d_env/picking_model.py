@@ -4,7 +4,7 @@ every physics substep (dm_control's ``after_substep``), apart from the gym API.
 | rule | where | numbers |
 | --- | --- | --- |
 | what the tool holds and when it lets go (suction: seal, grip weld, grip loss; hand: fingers) | the tool, :mod:`sms3d_env.tools` (``Tool`` protocol) | see each tool |
-| root detachment: the root weld's pull, bend and twist against their limits | ``_check_roots`` | ``physics.root_utilisation`` |
+| root detachment: the root's pull, bend and twist against their limits (a stiff weld, or with ``compliant_root`` a ball constraint and springs, :mod:`sms3d_env.roots`) | ``_check_roots`` | ``physics.root_utilisation`` |
 | bruising: cap contact force above the threshold | ``_contacts`` | ``bruise_force`` |
 | bruising by slip-shear (``slip_bruising``): friction work slipping on a cap | ``_slip_shear`` | ``slip_bruise_work`` |
 | neighbours disturbed: moved further than the tolerance, or detached | ``after_step`` | ``disturb_tolerance`` |
@@ -20,7 +20,7 @@ Usage (what ``SMS3DPickEnv.step`` does)::
         if model.needs_substep_check():
             model.after_substep()
     model.after_step()
-    info = model.evaluate()
+    info = model.evaluate(control_dt)
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ import numpy as np
 from sms3d_env import physics as ph
 from sms3d_env.episode_state import EpisodeState
 from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.roots import CompliantRoots
 from sms3d_env.tools import Tool, make_tool
 from sms3d_env.world import World
 
@@ -62,6 +63,7 @@ class PickingModel:
         self.world, self.params = world, params
         self.state = EpisodeState(target=target, reachable=reachable)
         self.tool: Tool = make_tool(world, params, self.state, latched)
+        self.roots = CompliantRoots(world, params) if params.compliant_root else None
         self._qfrc = np.zeros(world.model.nv)
         self._vel6 = np.zeros(6)
         self.init_xpos = np.zeros((len(world.body_ids), 3))
@@ -87,15 +89,20 @@ class PickingModel:
     def needs_substep_check(self) -> bool:
         """Whether ``after_substep`` has anything to decide (contacts, a grip, or the tool's
         hold to re-decide)."""
-        return self.tool.checks_every_substep or self.world.data.ncon > 0 or self.state.grip >= 0
+        return (self.tool.checks_every_substep or self.world.data.ncon > 0 or self.state.grip >= 0
+                or (self.roots is not None and self.roots.any_active))
 
     def after_substep(self) -> None:
         """Bruises, the tool's hold and root loads from this physics step's contacts and welds."""
-        ep, w = self.state, self.world
-        touched = self._contacts()
+        ep, w, roots = self.state, self.world, self.roots
+        touched, in_contact = self._contacts()
         self.tool.update_hold()
         if ep.grip >= 0:
             touched.add(ep.grip)
+        if roots is not None:  # every root a contact loads, the robot's or a neighbour's
+            roots.wake(in_contact | touched)
+            roots.apply()
+            touched = set(np.flatnonzero(roots.active).tolist())
         rooted = [k for k in touched if w.root_eq[k] >= 0 and w.data.eq_active[w.root_eq[k]]]
         if rooted:
             self._check_roots(rooted)
@@ -107,6 +114,10 @@ class PickingModel:
         ep, w, d = self.state, self.world, self.world.data
         self.tool.after_step()
         ep.steps += 1
+        if ep.grip_step < 0 and ep.ever_gripped_target:
+            ep.grip_step = ep.steps
+        if ep.detach_step < 0 and ep.target_detached:
+            ep.detach_step = ep.steps
         gap = d.site_xpos[w.tool_site] - d.site_xpos[w.cap_top_sites[ep.target]]
         ep.closest_approach = min(ep.closest_approach, float(np.sqrt(gap @ gap)))
         # Only mushrooms with a free joint can move (the others are static bodies).
@@ -129,16 +140,18 @@ class PickingModel:
         ep.max_lift = max(ep.max_lift, self.lift())
 
     # ------------------------------------------------------------------ contacts
-    def _contacts(self) -> set[int]:
-        """Mushrooms the robot touches (each contact reported to the tool); bruises."""
+    def _contacts(self) -> tuple[set[int], set[int]]:
+        """Mushrooms the robot touches (each contact reported to the tool), and every mushroom in
+        a contact; bruises."""
         w, ep, p = self.world, self.state, self.params
         m, d = w.model, w.data
         touched: set[int] = set()
         ncon = d.ncon
         if not ncon:
-            return touched
+            return touched, set()
         geoms = d.contact.geom[:ncon]
         rows = np.nonzero((w.geom_mushroom[geoms] >= 0).any(axis=1))[0]
+        in_contact = set(w.geom_mushroom[geoms[rows]].ravel().tolist()) - {-1}
         f6 = np.zeros(6)
         tool = self.tool
         for c in rows:
@@ -156,7 +169,7 @@ class PickingModel:
                     ep.bruised.add(int(k))
                 if w.is_cap[g] and p.slip_bruising:
                     self._slip_shear(int(c), int(k), f6)
-        return touched
+        return touched, in_contact
 
     def _slip_shear(self, contact: int, k: int, f6: np.ndarray) -> None:
         """Add one physics step's friction work slipping on cap ``k`` at ``contact`` (its force
@@ -197,10 +210,15 @@ class PickingModel:
             force, torque = ph.free_body_wrench(q, w.dofadr[k], rot)
             axis = rot[:, 2]
             tension = max(0.0, -float(force @ axis))
-            tw, bend = ph.axial_split(torque, axis)
+            if self.roots is None:
+                tw, bend = ph.axial_split(torque, axis)
+            else:  # the ball constraint at the stem base holds no moment: the springs do
+                bend, tw = self.roots.moments(k)
             u = ph.root_utilisation(tension, bend, abs(tw), self.params)
             if u >= 1.0:
                 d.eq_active[w.root_eq[k]] = 0
+                if self.roots is not None:
+                    self.roots.release(k)
                 for g in (w.cap_geoms[k], w.stem_geoms[k]):
                     m.geom_contype[g], m.geom_conaffinity[g] = ph.FREE_CONTYPE, w.free_aff
                 b = w.body_ids[k]
@@ -278,8 +296,9 @@ class PickingModel:
             return "neighbour_disturbed"
         return "timeout"
 
-    def evaluate(self) -> dict[str, Any]:
-        """The episode's outcome so far (ManiSkill's ``evaluate()``): the env's ``info``."""
+    def evaluate(self, control_dt: float) -> dict[str, Any]:
+        """The episode's outcome so far (ManiSkill's ``evaluate()``): the env's ``info``;
+        ``control_dt`` times its events (s since reset, None before they happen)."""
         ep = self.state
         success = self.success()
         return {
@@ -295,4 +314,7 @@ class PickingModel:
             "neighbours_disturbed": len(ep.disturbed),
             "lift": self.lift(),
             "unstable_simulation": ep.unstable,
+            "time_s": round(ep.steps * control_dt, 9),
+            "time_gripped_s": None if ep.grip_step < 0 else round(ep.grip_step * control_dt, 9),
+            "time_detached_s": None if ep.detach_step < 0 else round(ep.detach_step * control_dt, 9),
         }

@@ -163,11 +163,21 @@ def aim_pick_camera(model: mujoco.MjModel, cap_top: np.ndarray, mount_pos: Seque
     model.cam_pos[cam], model.cam_quat[cam] = eye, quat
 
 
-def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float) -> mujoco.MjSpec:
-    """The scene + robot ``MjSpec`` (grip welds or stem sockets per free mushroom, cameras)."""
+def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float,
+               compliant_root: bool = False) -> mujoco.MjSpec:
+    """The scene + robot ``MjSpec`` (grip welds or stem sockets per free mushroom, cameras).
+    ``compliant_root``: each root is a ball constraint at the stem base (``connect``) instead of
+    a weld, its bending and twist left to :mod:`sms3d_env.roots`' springs, gravity compensated
+    while rooted."""
     from generator.mjcf import scene_to_spec
 
     spec = scene_to_spec(scene, free_ids=free)
+    if compliant_root:
+        for i in free:
+            root = spec.equality(f"mushroom_{i}_root")
+            root.type = mujoco.mjtEq.mjEQ_CONNECT
+            root.data[:] = 0.0  # the anchor: body1's (the mushroom's) origin, its stem base
+            spec.body(f"mushroom_{i}").gravcomp = 1.0
     attach_robot(spec, robot)
     if robot.tool == "suction":
         for i in sorted(free):
@@ -197,22 +207,23 @@ def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float) ->
 
 def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | None,
                 timestep: float, cache: dict[Any, mujoco.MjModel] | None = None,
-                cache_key: Any = None, mushrooms_collide: bool = False) -> World:
+                cache_key: Any = None, mushrooms_collide: bool = False, compliant_root: bool = False) -> World:
     """Assemble the world; with ``cache`` and ``cache_key``, the compiled model is kept there
     and copied (3 ms against 45 ms for a compile), as an episode changes its model (contact
     masks, weld data). ``mushrooms_collide``: every mushroom also collides with every other
     (``ValueError`` naming the pair when two of the bed's collision hulls interpenetrate at
-    rest by more than ``physics.MAX_REST_PENETRATION``)."""
+    rest by more than ``physics.MAX_REST_PENETRATION``); ``compliant_root``: see
+    ``world_spec``."""
     n = len(scene.instances)
     free = free_set(scene, target, free_radius)
     suction = robot.tool == "suction"
     compiled = cache is None or cache_key is None or cache_key not in cache
     if cache is not None and cache_key is not None:
         if compiled:
-            cache[cache_key] = world_spec(scene, free, robot, timestep).compile()
+            cache[cache_key] = world_spec(scene, free, robot, timestep, compliant_root).compile()
         m = copy.copy(cache[cache_key])
     else:
-        m = world_spec(scene, free, robot, timestep).compile()
+        m = world_spec(scene, free, robot, timestep, compliant_root).compile()
     aim_pick_camera(m, scene.instances[target].cap_top, robot.mount_pos)
     d = mujoco.MjData(m)
     is_free = np.array([i in free for i in range(n)])

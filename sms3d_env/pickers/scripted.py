@@ -2,8 +2,8 @@
 
 Phases: approach a stand-off point above the *estimated* cap top along the estimated stem axis
 with the cup facing down the axis; descend along the axis with suction on until the cup seals;
-twist about the estimated stem axis ("twist, do not pull", optionally with a gentle bend); lift
-straight up. A wrong estimate tilts the cup against the cap (no seal, or a contact off the cap
+twist about the estimated stem axis ("twist, do not pull", optionally with a gentle bend) until
+the vacuum sensor's seal load falls (the root let go); lift straight up. A wrong estimate tilts the cup against the cap (no seal, or a contact off the cap
 top) and twists about the wrong axis, which bends the root and the seal. ``HandPicker`` does the
 same with the Jaco hand: open, descend around the cap, close, twist, lift. For an arm whose
 straight Cartesian approach crosses a singularity (``RobotConfig.approach="joint"``: the v1 Jaco),
@@ -39,6 +39,7 @@ class _View(NamedTuple):
     c: np.ndarray  # estimated cap top
     axis: np.ndarray  # estimated stem axis (unit)
     held: bool  # the tool holds a mushroom (sealed, or pinched by the fingers)
+    load: float  # suction: the seal's load / capacity; hand: the finger force (N)
 
 
 class ScriptedPicker:
@@ -52,7 +53,9 @@ class ScriptedPicker:
     2. ``descend``: move down the axis with suction on until the cup seals (or give up);
     3. ``twist``: rotate about the estimated stem axis through the cup ("twist, do not pull"),
        with a slight pull along the axis and an optional gentle bend about the estimated stem
-       base; a wrong axis turns part of the twist into bending of the root and the seal;
+       base, until detachment is sensed (the seal's load, ``obs["suction"][2]``, falls below
+       ``detach_drop`` of its peak in the twist) or for ``twist_steps`` at most; a wrong axis
+       turns part of the twist into bending of the root and the seal;
     4. ``lift``: straight up, the speed ramped up (no jerk on the seal).
 
     ``for_env`` returns a ``HandPicker`` for an env with the hand.
@@ -62,7 +65,10 @@ class ScriptedPicker:
         standoff: approach point above the estimated cap top along the axis (m).
         stem_height: assumed cap-top-to-stem-base distance for the bend pivot (m).
         descend_speed: approach speed along the axis once at the stand-off point (m/s).
-        twist_rate: rad/s about the estimated axis during ``twist_steps`` control steps.
+        twist_rate: rad/s about the estimated axis, for at most ``twist_steps`` control steps.
+        detach_drop: the twist ends once the seal's load has fallen below this fraction of its
+            peak in the twist (a peak of at least ``detach_min_load``): the root let go and the
+            load it carried is gone. None: twist ``twist_steps`` always.
         bend_rate: rad/s of gentle bend (about a horizontal axis, pivot at the estimated stem base).
         pull_speed: slight withdrawal along the axis while twisting (m/s).
         lift_speed, lift_ramp_steps: lift speed (m/s), reached linearly over this many steps.
@@ -78,15 +84,17 @@ class ScriptedPicker:
     def __init__(self, max_linear_speed: float = 0.12, max_angular_speed: float = 0.8,
                  control_dt: float = 0.04, standoff: float = 0.03, stem_height: float = 0.04,
                  descend_speed: float = 0.02, twist_rate: float = 0.8, bend_rate: float = 0.0,
-                 twist_steps: int = 30, pull_speed: float = 0.002, settle_steps: int = 2,
+                 twist_steps: int = 45, pull_speed: float = 0.002, settle_steps: int = 2,
                  lift_speed: float = 0.06, lift_ramp_steps: int = 5,
-                 transfer: JointSpaceTransfer | None = None) -> None:
+                 transfer: JointSpaceTransfer | None = None, detach_drop: float | None = 0.5,
+                 detach_min_load: float = 0.1) -> None:
         self.vmax, self.wmax, self.dt = max_linear_speed, max_angular_speed, control_dt
         self.standoff, self.stem_height = standoff, stem_height
         self.descend_speed, self.bend_rate, self.twist_rate = descend_speed, bend_rate, twist_rate
         self.twist_steps, self.pull_speed, self.settle_steps = twist_steps, pull_speed, settle_steps
         self.lift_speed, self.lift_ramp_steps = lift_speed, lift_ramp_steps
         self.transfer = transfer
+        self.detach_drop, self.detach_min_load = detach_drop, detach_min_load
         self.reset()
 
     @classmethod
@@ -105,6 +113,7 @@ class ScriptedPicker:
         self.count = 0
         self.descended = 0.0
         self.lift_count = 0
+        self.peak_load = 0.0  # the seal's largest load in this twist
 
     def _action(self, v: np.ndarray, w: np.ndarray, command: float) -> np.ndarray:
         a = np.concatenate([v / self.vmax, w / self.wmax, [command]])
@@ -121,7 +130,7 @@ class ScriptedPicker:
         rot = _tool_rotation(obs["tool_pose"][3:])
         return _View(p=obs["tool_pose"][:3], rot=rot, z=rot[:, 2], q=obs["joint_pos"],
                      c=obs["target_pose"][:3], axis=axis / np.linalg.norm(axis),
-                     held=bool(obs["suction"][1] > 0.5))
+                     held=bool(obs["suction"][1] > 0.5), load=float(obs["suction"][2]))
 
     def __call__(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         return getattr(self, "_" + self.phase)(self.view(obs))
@@ -170,8 +179,12 @@ class ScriptedPicker:
 
     def _twist(self, o: _View) -> np.ndarray:
         self.count += 1
-        if self.count >= self.twist_steps:
+        self.peak_load = max(self.peak_load, o.load)
+        released = (self.detach_drop is not None and self.peak_load >= self.detach_min_load
+                    and o.load < self.detach_drop * self.peak_load)
+        if released or self.count >= self.twist_steps:
             self.phase = "lift"
+            return self._lift(o)
         return self._action(*self._twist_velocity(o), self.hold_command)
 
     def _twist_velocity(self, o: _View) -> tuple[np.ndarray, np.ndarray]:
@@ -213,6 +226,9 @@ class HandPicker(ScriptedPicker):
                  close_steps: int = 12, **kwargs: Any) -> None:
         self.grasp_offset, self.approach_command = grasp_offset, preshape
         self.close_steps = close_steps
+        # The fingers' force does not fall when the root lets go: twist the full twist_steps.
+        kwargs.setdefault("detach_drop", None)
+        kwargs.setdefault("twist_steps", 30)
         super().__init__(*args, **kwargs)
 
     def approach_goal(self, o: _View) -> np.ndarray:

@@ -123,7 +123,7 @@ def test_the_failure_cause_names_the_first_rule_the_episode_broke(make_world, up
         value = {ids[v] for v in value} if isinstance(value, set) else ids.get(value, value)
         setattr(model.state, name, value)
     assert cause in FAILURE_CAUSES
-    info = model.evaluate()
+    info = model.evaluate(0.04)
     assert (model.failure_cause(), info["failure_cause"], info["is_success"]) == (cause, cause, False)
 
 
@@ -153,7 +153,7 @@ def test_a_pick_that_moves_a_neighbour_is_no_success_when_picks_must_be_clean(ma
     ep.ever_gripped_target, ep.target_detached, ep.grip = True, True, upright
     ep.disturbed = {next(k for k in range(len(world.body_ids)) if k != upright)}
     _move(world, upright, np.array([0.0, 0.0, 1.01 * params.lift_height]))
-    info = model.evaluate()
+    info = model.evaluate(0.04)
     assert info["target_picked"] and info["neighbours_disturbed"] == 1
     assert info["is_success"] is not clean_pick
     assert info["failure_cause"] == ("neighbour_disturbed" if clean_pick else None)
