@@ -24,7 +24,8 @@ class EpisodeState:
     held_detached: bool = False  # hand: the target was held after its detachment
     finger_touch_step: int = -1  # hand: last env step in which a finger touched the target
     target_detached: bool = False
-    grip_lost: bool = False
+    grip_lost: bool = False  # the detached target's grip let go
+    seal_overloaded: bool = False  # the seal on the rooted target let go before its root did
     bruised: set[int] = field(default_factory=set)
     slip_work: dict[int, float] = field(default_factory=dict)  # friction work slipping on each cap (J)
     detached: set[int] = field(default_factory=set)

@@ -120,7 +120,8 @@ class SMS3DPickEnv(gym.Env):
     let go; None before: the cycle's phases whatever the policy), plus the
     staged reward's terms. ``failure_cause="not_reached"``: the tool never came within 1 cm of
     the target's true cap top (the approach stopped short); ``"no_seal"``: it did, and no seal
-    formed.
+    formed; ``"seal_overloaded"``: the seal let go under the twist or bend before the root did;
+    ``"not_detached"``: the root held through the whole twist.
 
     ## Arguments
     Each record argument also takes its mapping form (field name -> value, e.g.

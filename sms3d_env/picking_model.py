@@ -38,7 +38,7 @@ from sms3d_env.tools import Tool, make_tool
 from sms3d_env.world import World
 
 FAILURE_CAUSES = ("not_reached", "no_seal", "grip_lost", "not_detached", "bruised", "neighbour_disturbed",
-                  "unreachable", "timeout", "unstable_simulation")
+                  "unreachable", "timeout", "unstable_simulation", "seal_overloaded")
 #: The tool "reached" the target once its site came this close to the true cap top (m): an
 #: episode that never did fails as ``not_reached`` (the approach stopped short), not ``no_seal``.
 REACHED_DISTANCE = 0.01
@@ -291,7 +291,9 @@ class PickingModel:
                 return "neighbour_disturbed"
             return "no_seal" if ep.closest_approach <= REACHED_DISTANCE else "not_reached"
         if not ep.target_detached:
-            return "not_detached"
+            # The seal let go under the twist or bend before the root did (a cup too weak for
+            # the root, or a wrong axis bending it), or the root held through the whole twist.
+            return "seal_overloaded" if ep.seal_overloaded else "not_detached"
         if ep.disturbed:
             return "neighbour_disturbed"
         return "timeout"

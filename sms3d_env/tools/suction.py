@@ -187,8 +187,9 @@ class Suction:
                                    vacuum_fraction=rise)
         ep.grip_util += self._load_blend * (load - ep.grip_util)
         if ep.grip_util >= 1.0:
-            if k == ep.target and ep.target_detached:
-                ep.grip_lost = True
+            if k == ep.target:  # lost with the target off its roots, or before they gave way
+                ep.grip_lost = ep.grip_lost or ep.target_detached
+                ep.seal_overloaded = ep.seal_overloaded or not ep.target_detached
             self.release()
 
     # ------------------------------------------------------------------ episode
