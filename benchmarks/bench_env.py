@@ -1,11 +1,11 @@
-"""Speed of SMS3DPick-v1 (or ``--version v0``): env steps/s with random actions and the
+"""Speed of SMS3DPick-v2 (or ``--version v1``/``v0``): env steps/s with random actions and the
 registered 250-step time limit, so the resets it triggers are in the rate (state observations,
 50 mushrooms), reset time, and steps/s with 64 x 64 RGB-D observations; the training id's reset
 with and without a scene pool. Anchor: FetchPickAndPlace-v4, measured by bench_fetch.py in its
 own venv; with ``--fetch-python`` this script runs it before and after its own rows and prints
 the ratio.
 
-Usage: python benchmarks/bench_env.py [--steps 500] [--version v1] [--fetch-python /tmp/fetchenv/bin/python]
+Usage: python benchmarks/bench_env.py [--steps 500] [--version v2] [--fetch-python /tmp/fetchenv/bin/python]
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium as gym  # noqa: E402
 
-import generator  # noqa: E402
 import sms3d_env  # noqa: E402, F401
 from sms3d_env.controller import ControllerConfig  # noqa: E402
 
@@ -33,10 +32,8 @@ def measure(env_id: str, steps: int, image_obs: bool, n: int, pool: int = 0, sub
     before the timed steps; ``pool`` > 0 draws beds from a pool of that many, every one of them
     generated and compiled before the timing (as in a long training run, whose envs have drawn
     each bed of their pool)."""
-    from sms3d_env.scene_source import SceneSourceConfig
-
-    cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
-    env = gym.make(env_id, scene=SceneSourceConfig(config=cfg, pool=pool), image_obs=image_obs,
+    # The mapping form: each version's own placement (v2: no two collision hulls interpenetrating).
+    env = gym.make(env_id, scene={"config": {"placement": {"num_mushrooms": n}}, "pool": pool}, image_obs=image_obs,
                    controller=ControllerConfig(substeps=substeps))  # with its time limit
     env.reset(seed=0)
     source = env.unwrapped.scene_source
@@ -71,7 +68,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=500)
     ap.add_argument("--mushrooms", type=int, default=50)
     ap.add_argument("--resets", type=int, default=20)
-    ap.add_argument("--version", choices=("v1", "v0"), default="v1")
+    ap.add_argument("--version", choices=("v2", "v1", "v0"), default="v2")
     ap.add_argument("--substeps", type=int, default=ControllerConfig.substeps,
                     help="physics steps per 40 ms control step (ControllerConfig.substeps; default 10 x 4 ms)")
     ap.add_argument("--fetch-python", default=None,
@@ -112,10 +109,7 @@ def main() -> None:
 def reset_time(env_id: str, n: int, resets: int, pool: int, kwargs: dict) -> float:
     """Mean reset time once a pool of ``pool`` beds (if any) is warm: each of its beds and targets
     seen once."""
-    from sms3d_env.scene_source import SceneSourceConfig
-
-    cfg = generator.SceneConfig().replace(placement__num_mushrooms=n)
-    env = gym.make(env_id, scene=SceneSourceConfig(config=cfg, pool=pool), **kwargs)
+    env = gym.make(env_id, scene={"config": {"placement": {"num_mushrooms": n}}, "pool": pool}, **kwargs)
     for s in range(3 * max(pool, 1)):
         env.reset(seed=s)
     t = time.perf_counter()
