@@ -2,9 +2,12 @@
 
 Each control step, mink solves one QP (FrameTask on the tool site, PostureTask, joint position and
 velocity limits, solver daqp) on an arm-only model, so its cost does not grow with the number of
-mushrooms. The IK state is the *commanded* configuration; the actuators track it. When contact
-stops the arm, the command may lead the measured joints by at most ``max_lead`` rad, which bounds
-how hard the tool can press.
+mushrooms. The IK state is the *commanded* configuration; the actuators track it. The frame
+task's target is an anchored goal pose that integrates the commanded twists, so what the QP
+concedes in one step (to the posture task, to the joint-speed box) is made up in the next instead
+of accumulating as drift. When contact stops the arm, the command may lead the measured joints by
+at most ``max_lead`` rad, which bounds how hard the tool can press, and the goal is held within
+``GOAL_LEAD_STEPS_POS`` / ``GOAL_LEAD_STEPS_ANGLE`` steps of motion of the commanded tool pose.
 """
 
 from __future__ import annotations
@@ -21,6 +24,19 @@ from sms3d_env.robot import TOOL_SITE, RobotSpec, arm_only_model
 
 #: The IK's null-space posture rules (``ControllerConfig.posture_target``; :mod:`sms3d_env.posture`).
 POSTURE_TARGETS = ("estimate", "tool")
+
+#: How far the goal pose may lead the commanded tool pose, in control steps at the top speeds
+#: (``max_linear_speed`` / ``max_angular_speed`` x ``control_dt``; by default 9.6 mm, 0.032 rad).
+#: The position lead is above what the QP concedes in a step (~0.1 mm on the Jaco's free twist,
+#: more as an arm nears a joint's limit), so the concession is made up rather than forgotten, yet
+#: small: while contact holds the arm the goal cannot run on with the twist, and a tool that stalled
+#: against something is not snapped far once it comes free. The angle lead is one step, just
+#: enough for a free rotation at full speed: when the root holds the wrist back (the command
+#: clamped at ``max_lead``), the QP chases the rest of the turn with the shoulder and elbow, which
+#: swings the tool sideways; on the v1 Jaco's twist (10 scripted picks) that drift was at most
+#: 8 mm with one step, 14 mm with 1.25 and ~120 mm with two.
+GOAL_LEAD_STEPS_POS = 2.0
+GOAL_LEAD_STEPS_ANGLE = 1.0
 
 
 @dataclass(frozen=True)
@@ -125,12 +141,18 @@ class IKController:
         self.tasks = [self.frame_task, self.posture_task]
         speeds = np.where(slide, cfg.max_slide_speed, cfg.max_joint_speed)
         self.limits = [ArmBoxLimit(self.model, joints, speeds)]
+        self.goal = mink.SE3.identity()  # the frame task's anchored target; reset() sets it
+        self.goal_max_lead = (GOAL_LEAD_STEPS_POS * cfg.max_linear_speed * self.dt,
+                              GOAL_LEAD_STEPS_ANGLE * cfg.max_angular_speed * self.dt)
 
     def reset(self, q_arm: np.ndarray, q_home: np.ndarray | None = None) -> None:
-        """Set the commanded configuration (and the posture target) to ``q_arm``."""
+        """Set the commanded configuration (and the posture target) to ``q_arm``, and the goal
+        pose to the tool pose there."""
         q = self.model.qpos0.copy()
         q[self.arm_qadr] = q_arm
         self.configuration.update(q)
+        pos, quat = self._commanded_pose()
+        self.goal = mink.SE3(np.concatenate([quat, pos]))
         home = q.copy()
         if q_home is not None:
             home[self.arm_qadr] = q_home
@@ -150,24 +172,51 @@ class IKController:
         self.configuration.integrate_inplace(v, dt)
         return self.configuration.q[self.arm_qadr]
 
+    def _commanded_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tool site's position and quaternion (w, x, y, z) at the commanded configuration."""
+        d = self.configuration.data
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, d.site_xmat[self.site_id])
+        return d.site_xpos[self.site_id].copy(), quat
+
+    def _held_near_command(self, pos: np.ndarray, quat: np.ndarray) -> mink.SE3:
+        """The pose ``(pos, quat)`` moved back to within ``goal_max_lead`` (m, rad) of the
+        commanded tool pose, along the straight line and the shortest turn towards it."""
+        max_dist, max_angle = self.goal_max_lead
+        cmd_pos, cmd_quat = self._commanded_pose()
+        ahead = pos - cmd_pos
+        dist = np.linalg.norm(ahead)
+        if dist > max_dist:
+            pos = cmd_pos + ahead * (max_dist / dist)
+        inv, turn, rotvec = np.empty(4), np.empty(4), np.empty(3)
+        mujoco.mju_negQuat(inv, cmd_quat)
+        mujoco.mju_mulQuat(turn, quat, inv)
+        mujoco.mju_quat2Vel(rotvec, turn, 1.0)  # the world-frame turn from command to goal
+        angle = np.linalg.norm(rotvec)
+        if angle > max_angle:
+            mujoco.mju_axisAngle2Quat(turn, rotvec / angle, max_angle)
+            mujoco.mju_mulQuat(quat, turn, cmd_quat)
+        return mink.SE3(np.concatenate([quat, pos]))
+
     def step(self, twist: np.ndarray, q_measured: np.ndarray) -> np.ndarray:
         """Apply a world-frame twist (m/s, rad/s about the tool site) for one control period;
-        ``mink.exceptions.NoSolutionFound`` when the QP has no solution."""
+        ``mink.exceptions.NoSolutionFound`` when the QP has no solution (the goal then stays)."""
         q = self.configuration.q
         gap = q[self.arm_qadr] - q_measured
         if (np.abs(gap) > self.max_lead + 1e-8).any():
             q[self.arm_qadr] = q_measured + gap.clip(-self.max_lead, self.max_lead)
             self.configuration.update(q)
-        # Target = the commanded tool pose moved by the twist, the rotation composed in
+        # Target = the goal (not the commanded pose) moved by the twist, the rotation composed in
         # quaternions (no rotation-matrix round trip).
-        d = self.configuration.data
-        quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, d.site_xmat[self.site_id])
+        quat, pos = self.goal.wxyz_xyz[:4].copy(), self.goal.wxyz_xyz[4:] + twist[:3] * self.dt
         w = twist[3:] * self.dt
         angle = math.hypot(*w)
         if angle > 0.0:
             turn = np.empty(4)
             mujoco.mju_axisAngle2Quat(turn, w / angle, angle)
             mujoco.mju_mulQuat(quat, turn, quat.copy())
-        pos = d.site_xpos[self.site_id] + twist[:3] * self.dt
-        return self._solve(mink.SE3(np.concatenate([quat, pos])), self.dt)
+            mujoco.mju_normalize4(quat)  # the goal composes turns over a whole episode
+        goal = self._held_near_command(pos, quat)
+        q_arm = self._solve(goal, self.dt)
+        self.goal = goal
+        return q_arm
