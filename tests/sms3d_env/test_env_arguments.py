@@ -20,7 +20,7 @@ import sms3d_env  # noqa: F401  (registers the env ids)
 from sms3d_env.cameras import ImageObservation, RenderCamera
 from sms3d_env.controller import ControllerConfig
 from sms3d_env.env_args import translate_legacy_options
-from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.physics_params import V1_PHYSICS, PickPhysicsParams
 from sms3d_env.pick_env import V0_CONTROLLER, V0_FREE_RADIUS, V0_SEAL, SMS3DPickEnv
 from sms3d_env.pose_sources import NoisyPose
 from sms3d_env.records import record_of
@@ -31,6 +31,10 @@ from sms3d_env.targets import TargetRule
 from sms3d_env.training.actor import SHIPPED_TRIGGER, PolicyActor
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=6)
+#: SMALL in the mapping form, and the config it gives where mushrooms collide (v2, the class
+#: defaults): placed with no overlap of the collision hulls.
+SMALL_MAPPING = {"placement": {"num_mushrooms": 6}}
+SMALL_HULLS = SMALL.replace(placement__overlap_iou=0.0, placement__overlap_solids="hulls")
 RECORDS = (SceneSourceConfig, TargetRule, RewardConfig, ControllerConfig, PregraspStart, ImageObservation,
            RenderCamera)
 
@@ -61,18 +65,29 @@ def test_the_constructor_takes_at_most_16_arguments_each_in_the_arguments_table(
 
 
 def test_the_registered_ids_build_their_options_from_the_records():
-    made = {env_id: gym.make(env_id, scene=SMALL).unwrapped
-            for env_id in ("SMS3DPick-v0", "SMS3DPickTrain-v0", "SMS3DPick-v1", "SMS3DPickTrain-v1")}
+    # v2's mushrooms collide, so its generated beds are placed with no overlap of their collision
+    # hulls: the mapping form of a scene config says so by default (a SceneConfig object must).
+    scenes = {env_id: SMALL_MAPPING if env_id.endswith("-v2") else SMALL
+              for env_id in ("SMS3DPick-v0", "SMS3DPickTrain-v0", "SMS3DPick-v1", "SMS3DPickTrain-v1",
+                             "SMS3DPick-v2", "SMS3DPickTrain-v2")}
+    made = {env_id: gym.make(env_id, scene=scene).unwrapped for env_id, scene in scenes.items()}
     for env_id, env in made.items():
-        v0 = env_id.endswith("-v0")
-        assert env.scene_source.config == SceneSourceConfig(config=SMALL, free_radius=V0_FREE_RADIUS if v0 else None)
+        version = env_id[-2:]
+        v0 = version == "v0"
+        bed = SMALL_HULLS if version == "v2" else SMALL
+        assert env.scene_source.config == SceneSourceConfig(config=bed, free_radius=V0_FREE_RADIUS if v0 else None)
         assert env.reward_config.kind == ("staged" if "Train" in env_id else "dense")
-        assert (env.start, env.target_rule) == (None, TargetRule())
-        # v0 keeps its 2 ms physics step and per-step seal rule; v1 has the records' defaults.
+        # v2: the class defaults (the harvest-ready target, PickPhysicsParams()); v1 and v0:
+        # v1's picking model (V1_PHYSICS) and the tallest target.
+        assert env.start is None
+        assert env.target_rule == TargetRule("harvest_ready" if version == "v2" else "tallest")
+        # v0 keeps its 2 ms physics step and per-step seal rule; v1 and v2 have the records' defaults.
         assert env.ctrl_cfg == ControllerConfig(**V0_CONTROLLER if v0 else {})
-        assert env.params == PickPhysicsParams(**V0_SEAL if v0 else {})
+        physics = {} if version == "v2" else {**V1_PHYSICS, **(V0_SEAL if v0 else {})}
+        assert env.params == PickPhysicsParams(**physics), env_id
         env.close()
-    assert type(made["SMS3DPick-v1"].robot_cfg).__name__ == "GantryConfig"
+    for env_id in ("SMS3DPick-v1", "SMS3DPick-v2"):
+        assert type(made[env_id].robot_cfg).__name__ == "GantryConfig"
     assert type(made["SMS3DPick-v0"].robot_cfg).__name__ == "RobotConfig"
 
 
@@ -81,7 +96,8 @@ def test_the_v0_ids_keep_their_radius_unless_the_scene_source_sets_one():
     assert pooled.scene_source.config.free_radius == V0_FREE_RADIUS and pooled.scene_source.config.pool == 2
     wider = gym.make("SMS3DPick-v0", scene={"config": SMALL, "free_radius": 0.2}).unwrapped
     assert wider.scene_source.config.free_radius == 0.2
-    assert SMS3DPickEnv(scene=SMALL).scene_source.config.free_radius is None  # the env's own default: v1's
+    # The env's own default: every mushroom free (v1's and v2's).
+    assert SMS3DPickEnv(scene=SMALL_MAPPING).scene_source.config.free_radius is None
 
 
 @pytest.mark.parametrize("scene, expected", [

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 import generator
 import sms3d_env
 from sms3d_env.physics import grip_utilisation
+from sms3d_env.physics_params import V1_PHYSICS
 from sms3d_env.pick_env import V0_SEAL
 from sms3d_env.pose_sources import NoisyPose, OraclePose
 
@@ -16,8 +17,9 @@ SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
 
 
 def test_holding_force_from_vacuum_and_area():
-    p = sms3d_env.PickPhysicsParams()
-    assert p.holding_force == pytest.approx(20e3 * np.pi * 0.01**2)
+    p = sms3d_env.PickPhysicsParams()  # v2's 60 kPa on a 20 mm cup
+    assert p.holding_force == pytest.approx(60e3 * np.pi * 0.01**2)
+    assert sms3d_env.PickPhysicsParams(**V1_PHYSICS).holding_force == pytest.approx(20e3 * np.pi * 0.01**2)
     with pytest.raises(ValueError):
         sms3d_env.PickPhysicsParams(seal_angle_deg=95)
 
@@ -31,8 +33,8 @@ def test_pressing_the_cup_on_the_cap_adds_to_the_seals_capacity(tension, shear, 
     """v1's seal carries shear, bending and twist against the holding force plus the cup's
     compression of the cap; v0's (``V0_SEAL``) against the holding force alone; tension's
     capacity is the holding force either way, and each capacity is reached exactly."""
-    v1 = sms3d_env.PickPhysicsParams()
-    v0 = sms3d_env.PickPhysicsParams(**V0_SEAL)
+    v1 = sms3d_env.PickPhysicsParams(**V1_PHYSICS)
+    v0 = sms3d_env.PickPhysicsParams(**V1_PHYSICS, **V0_SEAL)
     load = (tension, shear, bend, twist)
     assert grip_utilisation(*load, v1, compression) <= grip_utilisation(*load, v1) + 1e-12
     assert grip_utilisation(*load, v0, compression) == grip_utilisation(*load, v0)

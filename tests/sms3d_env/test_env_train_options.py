@@ -287,7 +287,8 @@ def test_env_flags_take_bools_only(field, value):
 
 
 def test_env_flags_take_numpy_bools():
-    env = sms3d_env.SMS3DPickEnv(scene=SMALL, end_on_dead_end=np.bool_(True), task_obs=np.False_)
+    env = sms3d_env.SMS3DPickEnv(scene={"placement": {"num_mushrooms": 8}}, end_on_dead_end=np.bool_(True),
+                                 task_obs=np.False_)
     assert env.end_on_dead_end is True and env.task_obs is False
 
 

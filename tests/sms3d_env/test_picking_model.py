@@ -11,7 +11,7 @@ import pytest
 
 import generator
 from sms3d_env.gantry import GantryConfig
-from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.physics_params import V1_PHYSICS, PickPhysicsParams
 from sms3d_env.picking_model import FAILURE_CAUSES, REACHED_DISTANCE, PickingModel
 from sms3d_env.world import World
 
@@ -160,15 +160,17 @@ def test_a_pick_that_moves_a_neighbour_is_no_success_when_picks_must_be_clean(ma
 
 
 def test_a_clean_pick_episode_ends_when_the_target_is_picked_and_reports_the_neighbour():
-    """Seed 5 of a 25-mushroom bed with a random target: the scripted picker lifts the target and
-    moves one neighbour more than 5 mm (found by a search of seeds 0-5)."""
+    """Seed 5 of a 25-mushroom bed with a random target on v1's picking model (``V1_PHYSICS``,
+    mushrooms that do not collide, where the search was made): the scripted picker lifts the
+    target and moves one neighbour more than 5 mm (found by a search of seeds 0-5)."""
     from sms3d_env.pickers.episode import run_episode
     from sms3d_env.pickers.scripted import ScriptedPicker
 
     bed = generator.SceneConfig().replace(placement__num_mushrooms=25)
     results = {}
     for clean in (False, True):
-        env = gym.make("SMS3DPick-v1", scene=bed, target="random", physics=PickPhysicsParams(clean_pick=clean))
+        physics = PickPhysicsParams(**{**V1_PHYSICS, "clean_pick": clean})
+        env = gym.make("SMS3DPick-v1", scene=bed, target="random", physics=physics)
         results[clean] = run_episode(env, ScriptedPicker.for_env(env), 5)
         env.close()
     assert results[False]["success"] and results[False]["neighbours_disturbed"] == 1
@@ -181,8 +183,10 @@ def test_a_cap_scraped_by_a_sliding_neighbour_bruises_past_the_slip_shear_work(s
     """A loose cap dropped and dragged across a rooted neighbour's cap does friction work on it;
     past ``slip_bruise_work`` the neighbour is bruised (by slip-shear, not by pressure: the
     contact stays far below ``bruise_force``)."""
-    bed = generator.SceneConfig().replace(placement__num_mushrooms=10, placement__overlap_iou=0.0)
-    physics = PickPhysicsParams(mushrooms_collide=True, slip_bruising=True, slip_bruise_work=slip_bruise_work)
+    bed = generator.SceneConfig().replace(placement__num_mushrooms=10, placement__overlap_iou=0.0,
+                                          placement__overlap_solids="hulls")
+    physics = PickPhysicsParams(**{**V1_PHYSICS, "mushrooms_collide": True, "slip_bruising": True,
+                                   "slip_bruise_work": slip_bruise_work})
     env = gym.make("SMS3DPick-v1", scene=bed, physics=physics)
     env.reset(seed=3)
     base = env.unwrapped

@@ -3,13 +3,17 @@ and the mushrooms, and which mushrooms are free to move (``free_set``, ``free_ra
 
 from __future__ import annotations
 
+import dataclasses
+
 import gymnasium as gym
 import numpy as np
 import pytest
 
+import generator
 import sms3d_env  # noqa: F401  (registers the ids)
 from generator import SceneConfig
 from sms3d_env.gantry import GantryConfig
+from sms3d_env.physics_params import V1_PHYSICS, PickPhysicsParams
 from sms3d_env.robots import ROBOTS
 from sms3d_env.world import free_set
 
@@ -56,11 +60,12 @@ def test_only_mushrooms_within_the_free_radius_move_and_meet_the_robot(bed, upri
             assert not can_touch(m, g, world.terrain_geom)  # rooted: the soil waits for the lift
 
 
-def _colliding_env(num_mushrooms: int, overlap_iou: float = 0.0, collide: bool = True):
-    from sms3d_env.physics_params import PickPhysicsParams
-
-    bed = SceneConfig().replace(placement__num_mushrooms=num_mushrooms, placement__overlap_iou=overlap_iou)
-    return gym.make("SMS3DPick-v1", scene=bed, physics=PickPhysicsParams(mushrooms_collide=collide))
+def _colliding_env(num_mushrooms: int, collide: bool = True):
+    """``SMS3DPick-v1`` (``V1_PHYSICS``) with ``mushrooms_collide`` as given, on beds placed with
+    no overlap of their collision hulls (which an env whose mushrooms collide requires)."""
+    bed = SceneConfig().replace(placement__num_mushrooms=num_mushrooms, placement__overlap_iou=0.0,
+                                placement__overlap_solids="hulls")
+    return gym.make("SMS3DPick-v1", scene=bed, physics=PickPhysicsParams(**{**V1_PHYSICS, "mushrooms_collide": collide}))
 
 
 @pytest.mark.parametrize("collide", [False, True])
@@ -92,17 +97,36 @@ def test_seeded_100_mushroom_beds_placed_without_overlap_do_not_interpenetrate_a
         assert interpenetrating_mushrooms(w.model, w.geom_mushroom) == []
 
 
+#: The paper's placement, which lets the meshes' volumes overlap by 5 %.
+OVERLAPPING = {"num_mushrooms": 25, "overlap_iou": 0.05}
+
+
+@pytest.mark.parametrize("scene", [SceneConfig().replace(placement__num_mushrooms=25),  # the paper's 5 %
+                                   {"placement": OVERLAPPING}, {"config": {"placement": OVERLAPPING}, "pool": 1},
+                                   {"placement": {"num_mushrooms": 25, "overlap_solids": "meshes"}}])
+def test_an_env_whose_mushrooms_collide_refuses_a_bed_config_that_lets_them_overlap(scene):
+    with pytest.raises(ValueError, match=r"overlap_iou = 0 and placement.overlap_solids = 'hulls'"):
+        gym.make("SMS3DPick-v1", scene=scene, physics=PickPhysicsParams(**{**V1_PHYSICS, "mushrooms_collide": True}))
+    gym.make("SMS3DPick-v1", scene=scene).close()  # v1's mushrooms do not collide: any bed will do
+
+
 def test_a_bed_whose_mushrooms_interpenetrate_is_refused_when_they_collide():
-    env = _colliding_env(25, overlap_iou=0.05)  # the paper's placement lets volumes overlap by 5 %
+    # A fixed bed placed by the paper's rule (no config to refuse): refused at its reset.
+    bed = generator.generate_scene(SceneConfig().replace(placement__num_mushrooms=25), seed=1_000_000)
+    physics = PickPhysicsParams(**{**V1_PHYSICS, "mushrooms_collide": True})
+    env = gym.make("SMS3DPick-v1", scene=[bed], physics=physics)
     with pytest.raises(ValueError, match=r"interpenetrate by .* mm at rest.*overlap_iou = 0"):
         env.reset(seed=1_000_000)
+    gym.make("SMS3DPick-v1", scene=[bed]).reset(seed=1_000_000)  # v1's mushrooms do not collide
 
 
 def test_a_pool_bed_that_interpenetrates_is_refused_at_every_draw_not_only_the_first():
-    from sms3d_env.physics_params import PickPhysicsParams
-
-    bed = {"config": {"placement": {"num_mushrooms": 25}}, "pool": 1}  # the paper's 5 % overlap
-    env = gym.make("SMS3DPick-v1", scene=bed, physics=PickPhysicsParams(mushrooms_collide=True))
+    # The constructor refuses a config that lets the beds overlap; the rest check at reset is its
+    # second line (a pool bed's compiled model is cached): reach it by making the mushrooms collide
+    # after the env is built on the paper's 5 % overlap.
+    bed = {"config": {"placement": OVERLAPPING}, "pool": 1}
+    env = gym.make("SMS3DPick-v1", scene=bed).unwrapped
+    env.params = dataclasses.replace(env.params, mushrooms_collide=True)
     for seed in (0, 1):
         with pytest.raises(ValueError, match="interpenetrate"):
             env.reset(seed=seed)

@@ -17,7 +17,7 @@ import generator
 import sms3d_env  # noqa: F401  (registers the ids)
 from sms3d_env.episode_state import EpisodeState
 from sms3d_env.gantry import GantryConfig
-from sms3d_env.physics_params import PickPhysicsParams
+from sms3d_env.physics_params import V1_PHYSICS, PickPhysicsParams
 from sms3d_env.tools import Suction
 
 
@@ -214,15 +214,17 @@ def test_a_cup_tilted_past_its_compliance_does_not_seal(lip_cup, tilt_deg):
 
 
 def test_the_scripted_picker_20_degrees_off_seals_with_one_contact_but_not_with_the_whole_lip():
-    """The same episodes: the one-contact rule seals where the tilted rim first touches the dome;
-    the lip rule finds the far rim more than the lip's compliance off the cap."""
+    """The same episodes on v1's picking model (``V1_PHYSICS``), the lip rule on or off: the
+    one-contact rule seals where the tilted rim first touches the dome; the lip rule finds the
+    far rim more than the lip's compliance off the cap."""
     from sms3d_env.pickers.episode import run_episode
     from sms3d_env.pickers.scripted import ScriptedPicker
 
     outcomes = {}
     for lip in (False, True):
         env = gym.make("SMS3DPick-v1", scene=generator.SceneConfig().replace(placement__num_mushrooms=10),
-                       pose_source="noisy", pose_error_deg=20.0, physics=PickPhysicsParams(lip_seal=lip))
+                       pose_source="noisy", pose_error_deg=20.0,
+                       physics=PickPhysicsParams(**{**V1_PHYSICS, "lip_seal": lip}))
         picker = ScriptedPicker.for_env(env)
         outcomes[lip] = [run_episode(env, picker, seed)["failure_cause"] for seed in (1_000_000, 1_000_001)]
         env.close()

@@ -38,6 +38,8 @@ from sms3d_env.training.model_files import (
 from sms3d_env.training.zoo import RecipeError, read_run_yaml, read_vecnormalize, read_zoo_yaml
 
 ENV_ID = "SMS3DPickTrain-v1"
+#: The newest version of ENV_ID's env: a model with no record of its env runs there.
+NEWEST_ENV_ID = "SMS3DPickTrain-v2"
 
 
 def no_unpickling(monkeypatch) -> None:
@@ -113,7 +115,8 @@ def test_a_model_sb3_saved_runs_in_the_env_its_spaces_are_with_nothing_unpickled
     with monkeypatch.context() as m:
         no_unpickling(m)
         actor = PolicyActor(path)
-        assert actor.env_id == ENV_ID  # SMS3DPickTrain-v0 has the same spaces; v1 supersedes it
+        # SMS3DPickTrain-v0 and -v1 (ENV_ID, where it trained) have the same spaces; v2 supersedes them.
+        assert actor.env_id == NEWEST_ENV_ID
         assert PolicyActor(path, env_id=ENV_ID).env_id == ENV_ID
     env = actor.make_env(scene={"placement": {"num_mushrooms": 8}})
     try:
@@ -121,9 +124,9 @@ def test_a_model_sb3_saved_runs_in_the_env_its_spaces_are_with_nothing_unpickled
         np.testing.assert_array_equal(actor(obs), model.predict(obs, deterministic=True)[0])
     finally:
         env.close()
-    for extra in ([], ["--env-id", ENV_ID]):
+    for extra, env_id in (([], NEWEST_ENV_ID), (["--env-id", ENV_ID], ENV_ID)):
         assert main(["eval-policy", "--model", str(path), "--episodes", "1", "--num-mushrooms", "8", *extra]) == 0
-        assert f'"env_id": "{ENV_ID}"' in capsys.readouterr().out
+        assert f'"env_id": "{env_id}"' in capsys.readouterr().out
     assert main(["eval-policy", "--model", str(path), "--episodes", "1", "--env-id", "SMS3DPick-v1"]) == 2
     assert capsys.readouterr().out == (f"error: {path}: its observation and action spaces are not those of "
                                        "SMS3DPick-v1 (with its default options)\n")
@@ -153,9 +156,10 @@ def test_a_model_whose_spaces_fit_several_envs_is_refused_naming_them(tmp_path):
     env = gym.make("SMS3DPick-v0")
     PPO("MultiInputPolicy", env, n_steps=64, batch_size=64, device="cpu").save(tmp_path / "model.zip")
     env.close()
-    # SMS3DPick-v1 too (its robot has the Jaco's action space): two envs, the one in two versions.
-    with pytest.raises(PolicyFileError, match="are those of SMS3DPick-v0, SMS3DPickSparse-v0, SMS3DPick-v1; name its "
-                                              "env with --env-id"):
+    # SMS3DPick-v1 and -v2 too (their robot has the Jaco's action space): two envs, the one in three
+    # versions.
+    with pytest.raises(PolicyFileError, match="are those of SMS3DPick-v0, SMS3DPickSparse-v0, SMS3DPick-v1, "
+                                              "SMS3DPick-v2; name its env with --env-id"):
         PolicyActor(tmp_path / "model.zip")
     assert PolicyActor(tmp_path / "model.zip", env_id="SMS3DPickSparse-v0").env_id == "SMS3DPickSparse-v0"
 
