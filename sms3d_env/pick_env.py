@@ -29,7 +29,7 @@ from generator.gl import open_renderer
 from sms3d_env.cameras import ImageObservation, RenderCamera
 from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.env_args import RENDER_MODES, SUCTION_MODES, check_env_args, pose_error_of
-from sms3d_env.physics_params import PickPhysicsParams, physics_for
+from sms3d_env.physics_params import V1_PHYSICS, PickPhysicsParams, physics_for
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
 from sms3d_env.pose_sources import PoseSource, make_pose_source
 from sms3d_env.posture import IKPosture
@@ -507,7 +507,7 @@ def make_v0_env(scene: Any = None, **kwargs: Any) -> SMS3DPickEnv:
         source = replace(source, free_radius=V0_FREE_RADIUS)
     if kwargs.get("controller") is None:
         kwargs["controller"] = ControllerConfig(**V0_CONTROLLER)
-    env = SMS3DPickEnv(scene=source, **{"robot": V0_ROBOT, **kwargs})
-    if kwargs.get("physics") is None:  # the env's defaults for its robot, with v0's seal rule
-        env.params = replace(env.params, **V0_SEAL)
-    return env
+    if kwargs.get("physics") is None:  # v1's picking model for its robot, with v0's seal rule
+        kwargs["physics"] = {**V1_PHYSICS, **V0_SEAL}
+    kwargs.setdefault("target", "tallest")
+    return SMS3DPickEnv(scene=source, **{"robot": V0_ROBOT, **kwargs})

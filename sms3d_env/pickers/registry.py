@@ -24,7 +24,7 @@ PICKER_NAMES = {"scripted": "scripted picker", "policy": "shipped policy", "resi
 
 
 #: The env the scripted picker acts in (a learned picker acts in the one it was trained on).
-SCRIPTED_ENV_ID = "SMS3DPick-v1"
+SCRIPTED_ENV_ID = "SMS3DPick-v2"
 
 @dataclass(frozen=True)
 class PickerSpec:

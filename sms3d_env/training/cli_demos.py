@@ -11,7 +11,7 @@ from sms3d_env.training.config import POSTURE_TARGETS
 
 #: The ids the scripted picker records on: the training id (the observation the bc recipe clones)
 #: and the base id.
-RECORD_ENV_IDS = ("SMS3DPickTrain-v1", "SMS3DPick-v1")
+RECORD_ENV_IDS = ("SMS3DPickTrain-v2", "SMS3DPick-v2", "SMS3DPickTrain-v1", "SMS3DPick-v1")
 RECORD_POSE_SOURCES = ("oracle", "noisy", "perception")
 
 
@@ -137,7 +137,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--picker", default="scripted",
                    help="scripted (default), policy (the shipped policy) or policy:PATH (a saved model.zip)")
     p.add_argument("--env-id", choices=RECORD_ENV_IDS, default=None,
-                   help="the scripted picker's env (default SMS3DPickTrain-v1, the observation the bc recipe "
+                   help="the scripted picker's env (default SMS3DPickTrain-v2, the observation the bc recipe "
                         "clones); a policy records on its own")
     p.add_argument("--num-mushrooms", type=int, default=25, help="mushrooms per bed")
     p.add_argument("--pose-source", choices=RECORD_POSE_SOURCES, default=None,

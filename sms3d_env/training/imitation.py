@@ -44,7 +44,7 @@ from generator.run_folder import open_run_folder
 from sms3d_env.training.config import POSTURE_TARGETS, check_bed_size, env_options
 from sms3d_env.training.model_files import finished_run, run_settings, save_model
 
-TRAIN_ENV_ID = "SMS3DPickTrain-v1"
+TRAIN_ENV_ID = "SMS3DPickTrain-v2"
 TEACHERS = ("estimate", "truth")
 
 
@@ -58,7 +58,7 @@ class BCConfig:
 
     Args:
         demos: Minari dataset ids (under ``MINARI_DATASETS_PATH``) whose labelled episodes to
-            clone, recorded on ``SMS3DPickTrain-v1`` with this ``posture_target`` (``sms3d
+            clone, recorded on ``SMS3DPickTrain-v2`` with this ``posture_target`` (``sms3d
             record-demos``); their envs also run the DAgger rounds. Empty (default): record the
             demonstrations into ``out/datasets`` as the next five fields say (which are refused
             with ``demos`` given).
