@@ -62,6 +62,7 @@ def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = Contro
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the ids)
+    from sms3d_env.pickers.episode import run_episode
     from sms3d_env.pickers.scripted import ScriptedPicker
 
     kwargs = {} if target is None else {"target": target}
@@ -75,17 +76,12 @@ def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = Contro
     picker = ScriptedPicker.for_env(env)
     outcomes, times, phases = [], [], []
     for seed in range(HELD_OUT_SEED, HELD_OUT_SEED + episodes):
-        obs, info = env.reset(seed=seed)
-        picker.reset()
-        done = False
-        while not done:
-            obs, _, terminated, truncated, info = env.step(picker(obs))
-            done = terminated or truncated
-        outcomes.append("success" if info["is_success"] else info["failure_cause"])
-        if info["is_success"]:
-            times.append(info["time_s"])
-            phases.append((info["time_gripped_s"], info["time_detached_s"] - info["time_gripped_s"],
-                           info["time_s"] - info["time_detached_s"]))
+        result = run_episode(env, picker, seed)
+        outcomes.append("success" if result["success"] else result["failure_cause"])
+        if result["success"]:
+            times.append(result["time_s"])
+            phases.append((result["time_gripped_s"], result["time_detached_s"] - result["time_gripped_s"],
+                           result["time_s"] - result["time_detached_s"]))
     causes = collections.Counter(outcomes)
     grip, twist, lift = np.median(phases, axis=0).tolist() if phases else (None, None, None)
     return {"robot": robot, "error_deg": error_deg, "episodes": episodes, "substeps": substeps,

@@ -24,10 +24,9 @@ class PickPhysicsParams:
             and twist, as pickers are told to twist, not pull; the study sweeps it.
         bend_moment: bending moment at the root that detaches (N m). ASSUMPTION (no source):
             about 2 N of side force on a cap 4 cm above the root, 8x what gravity gives a 50 g
-            mushroom tilted by 30 degrees. It exceeds the seal's bending capacity (holding force
-            x a / 2 = 0.031 N m), so bending alone loses the grip before it detaches, as the
-            twist-first methods in docs/physics.md imply. (0.02 N m, the earlier value, is
-            0.5 N at the cap: a cup's approach alone uprooted mushrooms.)
+            mushroom tilted by 30 degrees. (0.02 N m, an earlier value, is 0.5 N at the cap: a
+            cup's approach alone uprooted mushrooms.) The study sweeps it x1/4-x16: the
+            scripted picker's success does not move with it.
         twist_torque: torque about the stem that detaches (N m). Xu et al. 2025: more than 3.2 N
             of shear grips and twists a mushroom, 0.02-0.1 N m at a grip radius of 7-30 mm;
             0.03 N m, the lower part of that range, is an ASSUMPTION within it (v1: 0.006, a
@@ -158,7 +157,7 @@ class PickPhysicsParams:
 
     @property
     def holding_force(self) -> float:
-        """Suction holding force = vacuum x cup area (N); 6.3 N with the defaults."""
+        """Suction holding force = vacuum x cup area (N); 18.8 N with the defaults (v1: 6.3 N)."""
         return self.vacuum * math.pi * self.cup_radius**2
 
 

@@ -49,8 +49,8 @@ def rest_axis_angles(quat: np.ndarray, rest: np.ndarray) -> np.ndarray:
 
 
 class CompliantRoots:
-    """The root springs of one episode's world (``world.model`` is changed: damping, gravity
-    compensation, the armature of mushrooms too light for the physics step to integrate their
+    """The root springs of one episode's world (built with ``world_spec(compliant_root=True)``,
+    which compensates gravity; ``world.model`` is changed here: damping, the armature of mushrooms too light for the physics step to integrate their
     springs, ``MAX_SPRING_STEP``)."""
 
     def __init__(self, world: World, params: PickPhysicsParams) -> None:
@@ -97,7 +97,6 @@ class CompliantRoots:
         inertia = base_inertia + self.armature[free]
         damping = 2.0 * params.root_damping_ratio * np.sqrt(self.stiffness[free] * inertia)
         m.dof_damping[self.rot_dofs[free]] = damping
-        m.body_gravcomp[world.body_ids[free]] = 1.0
 
     @property
     def any_active(self) -> bool:

@@ -124,6 +124,10 @@ class SceneSourceConfig:
 _SOURCE_FIELDS = frozenset(f.name for f in dataclasses.fields(SceneSourceConfig))
 
 
+#: The placement fields of a bed whose collision hulls do not interpenetrate (mushrooms that collide).
+TOUCHING_PLACEMENT = {"overlap_iou": 0.0, "overlap_solids": "hulls"}
+
+
 def default_scene_config(touching: bool) -> Any:
     """The generated bed when ``scene`` gives none: 25 mushrooms, otherwise the generator's
     defaults; ``touching`` (mushrooms collide): placed so that no two collision hulls
@@ -132,7 +136,7 @@ def default_scene_config(touching: bool) -> Any:
     import generator
 
     cfg = generator.SceneConfig().replace(placement__num_mushrooms=25)
-    return cfg.replace(placement__overlap_iou=0.0, placement__overlap_solids="hulls") if touching else cfg
+    return cfg.replace(**{f"placement__{k}": v for k, v in TOUCHING_PLACEMENT.items()}) if touching else cfg
 
 
 def _touching_placement(config: Mapping[str, Any]) -> dict[str, Any]:
@@ -141,7 +145,7 @@ def _touching_placement(config: Mapping[str, Any]) -> dict[str, Any]:
     placement = config.get("placement", {})
     if not isinstance(placement, Mapping):
         return dict(config)  # SceneConfig.from_dict names the field
-    return {**config, "placement": {"overlap_iou": 0.0, "overlap_solids": "hulls", **placement}}
+    return {**config, "placement": {**TOUCHING_PLACEMENT, **placement}}
 
 
 def scene_source_config(scene: Any, touching: bool = False) -> SceneSourceConfig:
@@ -186,7 +190,8 @@ class SceneSource:
     def __init__(self, config: SceneSourceConfig, touching: bool = False) -> None:
         self.config, self.touching = config, touching
         placement = None if config.config is None else config.config.placement
-        if touching and placement is not None and (placement.overlap_iou > 0 or placement.overlap_solids != "hulls"):
+        apart = placement is None or all(getattr(placement, k) == v for k, v in TOUCHING_PLACEMENT.items())
+        if touching and not apart:
             raise ValueError(
                 f"scene: with PickPhysicsParams.mushrooms_collide every mushroom collides with every other, so the "
                 f"generated beds must not interpenetrate: give placement.overlap_iou = 0 and placement.overlap_solids "

@@ -269,7 +269,8 @@ def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | 
             raise ValueError(f"the bed's mushrooms {i} and {j} interpenetrate by {depth * 1000:.1f} mm at rest "
                              f"({len(overlaps)} pairs deeper than {ph.MAX_REST_PENETRATION * 1000:g} mm): with "
                              "PickPhysicsParams.mushrooms_collide every mushroom collides with every other, so the "
-                             "bed must not interpenetrate; generate it with placement.overlap_iou = 0")
+                             "bed must not interpenetrate; generate it with placement.overlap_iou = 0 and "
+                             "placement.overlap_solids = 'hulls'")
     return World(
         model=m, data=d, scene=scene, tool=robot.tool, prefix=prefix, is_free=is_free,
         free_ids=np.array(sorted(free)), body_ids=body_ids, cap_geoms=cap_geoms,

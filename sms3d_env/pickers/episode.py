@@ -23,6 +23,8 @@ def run_episode(env: gym.Env, policy: Any, seed: int, options: dict[str, Any] | 
         "reachable": bool(info["reachable"]), "target": int(info["target"]), "steps": steps,
         "return": total, "neighbours_disturbed": int(info["neighbours_disturbed"]),
         "bruised": bool(info["bruised"]), "target_detached": bool(info["target_detached"]),
-        # Simulated seconds from reset to the episode's end (at success, the pick's cycle time).
+        # Simulated seconds from reset to the episode's end (at success, the pick's cycle time),
+        # and to the target's first grip and its detachment (None if they never happened).
         "time_s": float(info["time_s"]),
+        "time_gripped_s": info["time_gripped_s"], "time_detached_s": info["time_detached_s"],
     }

@@ -11,7 +11,7 @@ import pytest
 
 import generator
 from generator.mjcf import scene_to_model
-from sms3d_env import PickPhysicsParams, ScriptedPicker, SMS3DPickEnv
+from sms3d_env import PickPhysicsParams, ScriptedPicker, SMS3DPickEnv, run_episode
 from sms3d_env.physics_params import V1_PHYSICS
 from sms3d_env.world import interpenetrating_mushrooms
 
@@ -119,16 +119,10 @@ def test_the_scripted_picker_lifts_once_the_root_lets_go():
     env = gym.make("SMS3DPick-v2")
     times = {}
     for drop in (0.5, None):
-        picker = ScriptedPicker.for_env(env, detach_drop=drop)
-        obs, info = env.reset(seed=SEED)
-        picker.reset()
-        done = False
-        while not done:
-            obs, _, terminated, truncated, info = env.step(picker(obs))
-            done = terminated or truncated
-        assert info["is_success"]
-        assert 0 < info["time_gripped_s"] < info["time_detached_s"] < info["time_s"]
-        times[drop] = info["time_s"] - info["time_detached_s"]
+        row = run_episode(env, ScriptedPicker.for_env(env, detach_drop=drop), SEED)
+        assert row["success"]
+        assert 0 < row["time_gripped_s"] < row["time_detached_s"] < row["time_s"]
+        times[drop] = row["time_s"] - row["time_detached_s"]
     # Sensing the release saves the twist after it: the lift begins within a step or two.
     assert times[0.5] < times[None] - 0.3
     env.close()
