@@ -127,7 +127,7 @@ def register(subparsers: Any) -> None:
         "record-demos", help="record a picker's episodes as a Minari dataset (observations, executed actions, "
                              "the picker's labels; success and failure cause per episode)")
     p.add_argument("--dataset-id", required=True, metavar="ID",
-                   help="Minari's (namespace/)name-v<N>, e.g. sms3d/pick-v1/scripted-v0; written under "
+                   help="Minari's (namespace/)name-v<N>, e.g. sms3d/pick-v2/scripted-v0; written under "
                         "MINARI_DATASETS_PATH (default ~/.minari/datasets)")
     p.add_argument("--overwrite", action="store_true",
                    help="delete an existing dataset of that id first (only that dataset: an id that names a "

@@ -283,7 +283,6 @@ class TrainConfig:
         """``make_env`` arguments of the run's envs: its training envs, or with ``evaluation`` its
         evaluation env (fresh beds instead of the pool, every episode from home); ``pose_source``
         and ``pose_error_deg`` replace the run's pose condition (its drawn error range too)."""
-        from sms3d_env.scene_source import SceneSourceConfig
         from sms3d_env.start_states import PregraspStart
 
         kw = env_kwargs(self.num_mushrooms, pose_source or self.pose_source,
@@ -294,7 +293,7 @@ class TrainConfig:
         if self.pose_error_range_deg is not None and pose_error_deg is None:
             kw["pose_error_deg"] = self.pose_error_range_deg
         if self.scene_pool and not evaluation:
-            kw["scene"] = SceneSourceConfig(config=kw["scene"], pool=self.scene_pool)
+            kw["scene"] = {"config": kw["scene"], "pool": self.scene_pool}  # SceneSourceConfig's mapping form
         if self.pregrasp_start and not evaluation:
             kw["start"] = PregraspStart(float(self.pregrasp_start))
         kw.update(env_options(self.posture_target))
@@ -320,10 +319,9 @@ def env_kwargs(num_mushrooms: int, pose_source: str, pose_error_deg: float, posi
                reward_type: str = "dense", max_episode_steps: int = 250) -> dict[str, Any]:
     """``make_env`` arguments for a bed size, a pose condition (``position_noise`` > 0: a
     ``NoisyPose`` with that position noise, m) and a reward."""
-    import generator
-
+    # The mapping form: the env completes its placement (hull-apart where mushrooms collide).
     kw: dict[str, Any] = {
-        "scene": generator.SceneConfig().replace(placement__num_mushrooms=int(num_mushrooms)),
+        "scene": {"placement": {"num_mushrooms": int(num_mushrooms)}},
         "pose_source": pose_source, "reward_type": reward_type,
         "max_episode_steps": int(max_episode_steps),
     }

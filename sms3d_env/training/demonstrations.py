@@ -119,7 +119,7 @@ def minari_root(folder: str | Path | None) -> Iterator[Path]:
 
 
 def check_dataset_id(dataset_id: str) -> str:
-    """``dataset_id`` if Minari takes it (``namespace/name-vN``, e.g. ``sms3d/pick-v1/scripted-v0``);
+    """``dataset_id`` if Minari takes it (``namespace/name-vN``, e.g. ``sms3d/pick-v2/scripted-v0``);
     ``ValueError`` naming it otherwise (its namespace, when only that is what Minari refuses)."""
     minari = _minari()
     dataset_id = str(dataset_id)
@@ -132,9 +132,9 @@ def check_dataset_id(dataset_id: str) -> str:
         if namespace and not minari.namespace.NAMESPACE_REGEX.fullmatch(namespace):
             raise ValueError(f"dataset_id {dataset_id!r}: Minari refuses the namespace {namespace!r}; a namespace "
                              "has at least two characters, each a letter, digit, '-' or '_' (with '/' between "
-                             "parts), e.g. sms3d/pick-v1/scripted-v0")
+                             "parts), e.g. sms3d/pick-v2/scripted-v0")
         raise ValueError(f"dataset_id must be Minari's (namespace/)name-v<version>, e.g. "
-                         f"sms3d/pick-v1/scripted-v0; got {dataset_id!r}")
+                         f"sms3d/pick-v2/scripted-v0; got {dataset_id!r}")
     return dataset_id
 
 
@@ -145,7 +145,7 @@ def dataset_path(dataset_id: str) -> Path:
 
 def check_not_namespace(dataset_id: str) -> None:
     """``DatasetError`` when the folder of ``dataset_id`` is a Minari namespace, one that holds
-    other datasets (``sms3d/pick-v1`` beside ``sms3d/pick-v1/scripted-v0``), naming what it holds:
+    other datasets (``sms3d/pick-v2`` beside ``sms3d/pick-v2/scripted-v0``), naming what it holds:
     an id of that name can be neither recorded nor deleted without them."""
     folder = dataset_path(dataset_id)
     if not folder.is_dir() or (folder / "data").is_dir():

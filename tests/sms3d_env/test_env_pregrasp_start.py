@@ -12,17 +12,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import generator
 import sms3d_env  # noqa: F401  (registers the env ids)
 from sms3d_env.pickers.episode import run_episode
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.start_states import PregraspStart
 
-BED = generator.SceneConfig().replace(placement__num_mushrooms=10)
+BED = {"placement": {"num_mushrooms": 10}}
 
 
 def _env(**kw):
-    return gym.make("SMS3DPickTrain-v0", scene=BED, **kw)
+    return gym.make("SMS3DPickTrain-v2", scene=BED, **kw)
 
 
 def _start_distance(seed: int, **kw) -> float:
@@ -71,7 +70,7 @@ def test_home_starts_are_the_default_and_draw_nothing_from_the_episode_stream():
     for key in a:
         np.testing.assert_array_equal(a[key], b[key])
     assert next_a != next_b
-    np.testing.assert_allclose(a["joint_pos"], sms3d_env.RobotConfig().home_q, atol=0.05)
+    np.testing.assert_allclose(a["joint_pos"], env.unwrapped.home_q, atol=0.05)
 
 
 def test_info_names_each_episodes_start_and_the_share_can_change_between_episodes():

@@ -34,7 +34,7 @@ def _run_until_sealed(env, seed=0):
 
 @pytest.mark.parametrize("mode, kept", [("latched", True), ("momentary", False)])
 def test_latched_suction_keeps_the_seal_through_off_commands(mode, kept):
-    env = gym.make("SMS3DPick-v0", scene=SMALL, suction_mode=mode)
+    env = gym.make("SMS3DPick-v2", scene={"placement": {"num_mushrooms": 8}}, suction_mode=mode)
     _run_until_sealed(env)
     off = np.zeros(7, np.float32)
     off[6] = -1.0

@@ -32,7 +32,7 @@ from sms3d_env.training.imitation import (
     train_env_kwargs,
 )
 
-DATASET = "sms3d/pick-v1/scripted-v0"
+DATASET = "sms3d/pick-v2/scripted-v0"
 SEEDS = (5, 6, 7)
 BED = 8
 
@@ -52,7 +52,7 @@ def test_the_dataset_holds_the_pickers_own_episodes(minari_root):
     dataset = minari.load_dataset(DATASET)
     assert dataset.total_episodes == 3
     outcomes = list(dataset.storage.get_episode_metadata(dataset.episode_indices))
-    env = gym.make("SMS3DPickTrain-v1", **train_env_kwargs(BED))
+    env = gym.make("SMS3DPickTrain-v2", **train_env_kwargs(BED))
     try:
         plain = [run_episode(env, ScriptedPicker.for_env(env), seed) for seed in SEEDS]
     finally:
@@ -73,7 +73,7 @@ def test_the_dataset_holds_the_pickers_own_episodes(minari_root):
 def test_the_metadata_says_what_made_the_dataset(minari_root):
     recording = minari.load_dataset(DATASET).storage.metadata["recording"]
     assert recording["picker"] == "scripted" and recording["pose_source"] == "oracle"
-    assert recording["seeds"] == list(SEEDS) and recording["env_id"] == "SMS3DPickTrain-v1"
+    assert recording["seeds"] == list(SEEDS) and recording["env_id"] == "SMS3DPickTrain-v2"
     assert recording["version"] == importlib.metadata.version("sms3d-pick") and recording["action_noise"] == 0.0
 
 
@@ -81,7 +81,7 @@ def test_recover_environment_builds_the_recorded_env(minari_root):
     dataset = minari.load_dataset(DATASET)
     env = dataset.recover_environment()
     try:
-        assert env.spec.id == "SMS3DPickTrain-v1"
+        assert env.spec.id == "SMS3DPickTrain-v2"
         obs, _ = env.reset(seed=SEEDS[0])
         assert len(env.unwrapped.scene.instances) == BED
         first = next(dataset.iterate_episodes())
@@ -96,7 +96,7 @@ def test_an_existing_id_is_refused_unless_overwritten(minari_root, capsys):
     before = data.stat().st_mtime_ns
     assert main(["record-demos", "--dataset-id", DATASET, "--episodes", "1", "--num-mushrooms", str(BED)]) == 2
     assert "--overwrite" in capsys.readouterr().out and data.stat().st_mtime_ns == before
-    other = "sms3d/pick-v1/overwritten-v0"
+    other = "sms3d/pick-v2/overwritten-v0"
     for episodes in (2, 1):
         assert main(["record-demos", "--dataset-id", other, "--episodes", str(episodes), "--num-mushrooms", str(BED),
                      "--overwrite"]) == 0
@@ -117,7 +117,7 @@ def test_an_empty_minari_datasets_path_is_refused_as_minari_takes_it_as_set(monk
     monkeypatch.setenv("MINARI_DATASETS_PATH", "")
     with pytest.raises(DatasetError, match="MINARI_DATASETS_PATH is set but empty"):
         datasets_root()
-    assert main(["record-demos", "--dataset-id", "sms3d/pick-v1/empty-v0", "--episodes", "1"]) == 2
+    assert main(["record-demos", "--dataset-id", "sms3d/pick-v2/empty-v0", "--episodes", "1"]) == 2
     assert "MINARI_DATASETS_PATH is set but empty" in capsys.readouterr().out
 
 
@@ -130,7 +130,7 @@ def test_a_killed_recordings_cache_is_removed_by_the_next_recording(minari_root)
     try:
         live = minari_root / f".recording.tmp{running.pid}"
         (live / "tmpbusy").mkdir(parents=True)
-        assert main(["record-demos", "--dataset-id", "sms3d/pick-v1/after-kill-v0", "--episodes", "1",
+        assert main(["record-demos", "--dataset-id", "sms3d/pick-v2/after-kill-v0", "--episodes", "1",
                      "--num-mushrooms", "5"]) == 0
         assert not orphan.exists() and live.is_dir()  # a running recording's cache stays
         assert sorted(p.name for p in minari_root.iterdir() if p.name.startswith(".")) == [live.name]
@@ -157,7 +157,7 @@ def _spoilt_copy(root, dataset_id: str, field: str) -> str:
 @pytest.mark.parametrize("field, named", [("infos/expert_action", "infos['expert_action']"),
                                           ("observations/target_pose", "observations['target_pose']")])
 def test_bc_refuses_a_dataset_holding_nan_before_training(minari_root, tmp_path, capsys, field, named):
-    dataset_id = _spoilt_copy(minari_root, f"sms3d/pick-v1/nan-{field.split('/')[-1].replace('_', '-')}-v0",
+    dataset_id = _spoilt_copy(minari_root, f"sms3d/pick-v2/nan-{field.split('/')[-1].replace('_', '-')}-v0",
                               field)
     out = tmp_path / "bc"
     assert main(["train-policy", "pick_policy", "--demos", dataset_id, "--out", str(out)]) == 2
@@ -171,7 +171,7 @@ def test_bc_refuses_a_dataset_holding_nan_before_training(minari_root, tmp_path,
 def test_a_loss_that_becomes_nan_stops_behaviour_cloning_before_the_weights(minari_root):
     import torch as th
 
-    env = gym.make("SMS3DPickTrain-v1", **train_env_kwargs(BED))
+    env = gym.make("SMS3DPickTrain-v2", **train_env_kwargs(BED))
     try:
         keys = list(env.observation_space.spaces)
         demos = labelled_steps([minari.load_dataset(DATASET)], keys)
@@ -195,16 +195,16 @@ def test_a_loss_that_becomes_nan_stops_behaviour_cloning_before_the_weights(mina
     (["--picker", "policy:/no/such/model.zip"], "/no/such/model.zip"),
 ])
 def test_bad_arguments_are_refused_by_name_before_recording(minari_root, capsys, argv, named):
-    args = ["record-demos", "--dataset-id", "sms3d/pick-v1/bad-v0", *argv]
+    args = ["record-demos", "--dataset-id", "sms3d/pick-v2/bad-v0", *argv]
     if "--dataset-id" in argv:
         args = ["record-demos", *argv]
     assert main(args) == 2
     assert named in capsys.readouterr().out
-    assert not (minari_root / "sms3d/pick-v1/bad-v0").exists()
+    assert not (minari_root / "sms3d/pick-v2/bad-v0").exists()
 
 
 def test_dart_noise_and_a_drawn_pose_error_are_recorded(minari_root):
-    dataset_id = "sms3d/pick-v1/noisy-v0"
+    dataset_id = "sms3d/pick-v2/noisy-v0"
     assert main(["record-demos", "--dataset-id", dataset_id, "--episodes", "1", "--num-mushrooms", str(BED),
                  "--pose-error-range", "5", "20", "--action-noise", "0.3"]) == 0
     dataset = minari.load_dataset(dataset_id)
@@ -236,7 +236,7 @@ def test_bc_clones_a_recorded_dataset_into_a_policy_that_runs(minari_root, tmp_p
     dagger = minari.MinariDataset(tmp_path / "bc" / "datasets" / "bc" / "dagger1-0-v0" / "data")
     assert dagger.env_spec == dataset.env_spec  # the round ran in the demonstrations' env
     result = evaluate_policy_success(tmp_path / "bc" / "model.zip", episodes=1, num_mushrooms=BED, seed=SEEDS[0])
-    assert result["episodes"] == 1 and result["env_id"] == "SMS3DPickTrain-v1"
+    assert result["episodes"] == 1 and result["env_id"] == "SMS3DPickTrain-v2"
 
 
 def test_bc_refuses_recording_settings_beside_given_demos():
@@ -247,14 +247,14 @@ def test_bc_refuses_recording_settings_beside_given_demos():
 
 
 def test_bc_refuses_demos_of_another_env_before_writing(minari_root, tmp_path):
-    dataset_id = "sms3d/pick-v1/base-v0"
+    dataset_id = "sms3d/pick-v2/base-v0"
     assert main(["record-demos", "--dataset-id", dataset_id, "--episodes", "1", "--num-mushrooms", str(BED),
                  "--env-id", "SMS3DPick-v1"]) == 0
     out = tmp_path / "bc"
     with pytest.raises(DatasetError, match=dataset_id):
         train_bc(BCConfig(demos=(dataset_id,), out=str(out)), progress=False)
     with pytest.raises(DatasetError, match="no Minari dataset"):
-        train_bc(BCConfig(demos=("sms3d/pick-v1/missing-v0",), out=str(out)), progress=False)
+        train_bc(BCConfig(demos=("sms3d/pick-v2/missing-v0",), out=str(out)), progress=False)
     assert not out.exists()
 
 
@@ -264,9 +264,12 @@ def test_the_env_takes_its_json_forms_and_refuses_bad_ones_by_name():
     error is a ``pose_error_deg`` pair."""
     import generator
     from generator.errors import ConfigError
+    from sms3d_env.scene_source import TOUCHING_PLACEMENT
 
-    as_object = gym.make("SMS3DPickTrain-v1", scene=generator.SceneConfig().replace(placement__num_mushrooms=BED))
-    as_mapping = gym.make("SMS3DPickTrain-v1", scene={"placement": {"num_mushrooms": BED}})
+    # The object form says the hull-apart placement the mapping form gets by default.
+    placement = {f"placement__{k}": v for k, v in {"num_mushrooms": BED, **TOUCHING_PLACEMENT}.items()}
+    as_object = gym.make("SMS3DPickTrain-v2", scene=generator.SceneConfig().replace(**placement))
+    as_mapping = gym.make("SMS3DPickTrain-v2", scene={"placement": {"num_mushrooms": BED}})
     try:
         for env in (as_object, as_mapping):
             env.reset(seed=4)
@@ -279,25 +282,26 @@ def test_the_env_takes_its_json_forms_and_refuses_bad_ones_by_name():
         as_object.close()
         as_mapping.close()
     with pytest.raises(ConfigError, match="num_mushroomz"):
-        gym.make("SMS3DPickTrain-v1", scene={"placement": {"num_mushroomz": 3}})
+        gym.make("SMS3DPickTrain-v2", scene={"placement": {"num_mushroomz": 3}})
     with pytest.raises(TypeError, match="scene must be"):
-        gym.make("SMS3DPickTrain-v1", scene=3)
+        gym.make("SMS3DPickTrain-v2", scene=3)
     for bad in ({"pose_error_deg": (0, 30)},  # needs the noisy source
                 {"pose_source": "noisy", "pose_error_deg": (30, 10)},
                 {"pose_source": "noisy", "pose_error_deg": (0, 30, 60)}):
         with pytest.raises(ValueError, match="pose_error_deg"):
-            gym.make("SMS3DPickTrain-v1", **bad)
+            gym.make("SMS3DPickTrain-v2", **bad)
 
 
 def test_every_record_argument_has_a_json_form_that_rebuilds_the_same_env():
     from sms3d_env.cameras import ImageObservation, RenderCamera
     from sms3d_env.controller import ControllerConfig
     from sms3d_env.rewards import RewardConfig
-    from sms3d_env.scene_source import SceneSourceConfig
+    from sms3d_env.scene_source import TOUCHING_PLACEMENT, SceneSourceConfig
     from sms3d_env.start_states import PregraspStart
     from sms3d_env.targets import TargetRule
 
-    records = {"scene": SceneSourceConfig(config={"placement": {"num_mushrooms": BED}}, pool=2, pool_seed=3),
+    records = {"scene": SceneSourceConfig(config={"placement": {"num_mushrooms": BED, **TOUCHING_PLACEMENT}},
+                                          pool=2, pool_seed=3),
                "target": TargetRule("random", max_tilt_deg=30.0), "reward_type": RewardConfig("staged", 200),
                "controller": ControllerConfig(substeps=10, posture_target="tool"), "start": PregraspStart(0.5),
                "image_obs": ImageObservation((16, 24)), "render_camera": RenderCamera("side", (32, 48))}
@@ -305,7 +309,7 @@ def test_every_record_argument_has_a_json_form_that_rebuilds_the_same_env():
              "target": {"rule": "random", "max_tilt_deg": 30.0}, "reward_type": {"kind": "staged", "horizon": 200},
              "controller": {"substeps": 10, "posture_target": "tool"}, "start": {"share": 0.5},
              "image_obs": {"size": [16, 24]}, "render_camera": {"name": "side", "size": [32, 48]}}
-    env = gym.make("SMS3DPickTrain-v1", **forms)
+    env = gym.make("SMS3DPickTrain-v2", **forms)
     rebuilt = gym.make(gym.envs.registration.EnvSpec.from_json(env.spec.to_json()))
     try:
         for made in (env, rebuilt):

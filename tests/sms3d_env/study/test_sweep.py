@@ -195,9 +195,9 @@ def test_robot_is_an_axis_with_a_column_a_curve_and_a_map_per_robot(tmp_path, ca
     with pytest.raises(SystemExit) as exited:
         main(["sweep", "--out", str(tmp_path / "bad"), "--robot", "ur5"])
     assert exited.value.code == 2 and "--robot: invalid choice: 'ur5'" in capsys.readouterr().err
-    # A folder of SMS3DPick-v0 parts (recorded before the env id was) is not resumed by a v1 sweep.
+    # A folder of SMS3DPick-v0 parts (recorded before the env id was) is not resumed by a v2 sweep.
     record = json.loads((tmp_path / "sweep_config.json").read_text())
-    assert record["env_id"] == "SMS3DPick-v1"
+    assert record["env_id"] == "SMS3DPick-v2"
     del record["env_id"]
     (tmp_path / "sweep_config.json").write_text(json.dumps(record))
     with pytest.raises(ValueError, match="env_id: folder has 'SMS3DPick-v0'"):

@@ -28,7 +28,7 @@ def test_bc_recipe_writes_a_policy_that_loads_and_acts(bc_run):
     out, cfg, summary = bc_run
     assert summary["demo_episodes_kept"] >= 1 and summary["training_steps"] > summary["demo_steps"]
     saved = json.loads((out / "config.json").read_text())
-    assert saved["env_id"] == "SMS3DPickTrain-v1" and saved["env_options"]["suction_mode"] == "latched"
+    assert saved["env_id"] == "SMS3DPickTrain-v2" and saved["env_options"]["suction_mode"] == "latched"
     actor = PolicyActor(out / "model.zip")
     env, picker = make_picker_env(parse_picker(f"policy:{out / 'model.zip'}"))
     obs, _ = env.reset(seed=0)
@@ -76,7 +76,7 @@ def test_eval_policy_prints_the_success_line(bc_run, capsys):
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert last.startswith("success ") and "/2 (" in last and "95 % CI" in last
     res = json.loads((out / "eval.json").read_text())
-    assert len(res["per_episode"]) == 2 and res["env_id"] == "SMS3DPickTrain-v1"
+    assert len(res["per_episode"]) == 2 and res["env_id"] == "SMS3DPickTrain-v2"
 
 
 def test_eval_policy_names_a_missing_model(capsys, tmp_path):

@@ -172,8 +172,6 @@ def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
     """The training envs start a share of their episodes on the way to a pre-grasp pose and draw
     their beds from a pool; the periodic evaluation and every later evaluation of the saved policy
     start at home on fresh beds."""
-    from generator import SceneConfig
-    from sms3d_env.scene_source import SceneSourceConfig
     from sms3d_env.start_states import PregraspStart
     from sms3d_env.training import rl
     from sms3d_env.training.actor import PolicyActor
@@ -186,8 +184,8 @@ def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
     train_policy(cfg)
     training, evaluation = built
     assert training["start"] == PregraspStart(0.5) and "start" not in evaluation
-    assert isinstance(training["scene"], SceneSourceConfig) and training["scene"].pool == 2
-    assert isinstance(evaluation["scene"], SceneConfig) and evaluation["scene"] == training["scene"].config
+    assert training["scene"] == {"config": {"placement": {"num_mushrooms": 8}}, "pool": 2}
+    assert evaluation["scene"] == training["scene"]["config"]
     assert json.loads((tmp_path / "config.json").read_text())["pregrasp_start"] == 0.5
     assert PolicyActor(tmp_path / "model.zip").env_options == {}
     assert "start" not in TrainConfig().env_kwargs()
@@ -237,7 +235,7 @@ def _train_policy_command(argv, capsys):
 @pytest.mark.parametrize("argv, flag", [
     (["pick_policy", "--steps", "5"], "--steps: a bc recipe has no total_steps"),
     (["pick_policy", "--init-model", "runs/x/model.zip"], "--init-model: a bc recipe has no init_model"),
-    (["ppo", "--demos", "sms3d/pick-v1/x-v0"], "--demos: an rl recipe has no demos"),
+    (["ppo", "--demos", "sms3d/pick-v2/x-v0"], "--demos: an rl recipe has no demos"),
     (["ppo", "--num-mushrooms", "10", "25"], "--num-mushrooms: an rl recipe trains on one bed size"),
     (["ppo", "--hyperparams", "lr=1e-3"], "--hyperparams: no field lr in an rl recipe"),
     (["ppo", "--hyperparams", "learning_rate"], "--hyperparams 'learning_rate': must be KEY=VALUE"),
@@ -442,7 +440,7 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
     model = load_model(tmp_path / "model.zip")
     assert type(model.policy).__name__ == "ActorCriticPolicy"  # MlpPolicy, not MultiInputActorCriticPolicy
     actor = PolicyActor(tmp_path / "model.zip")
-    bed = {"scene": generator.SceneConfig().replace(placement__num_mushrooms=8)}
+    bed = {"scene": {"placement": {"num_mushrooms": 8}}}
     env, flat_env = actor.make_env(**bed), make_env("SMS3DPickTrain-v0", flat_observation=True, **bed)
     try:
         obs, _ = env.reset(seed=3)
