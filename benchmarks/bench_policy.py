@@ -23,7 +23,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # runs from a chec
 
 from tqdm import tqdm  # noqa: E402
 
-import generator  # noqa: E402
 from sms3d_env.pickers.episode import run_episode  # noqa: E402
 from sms3d_env.pickers.registry import make_picker_env, parse_picker  # noqa: E402
 from sms3d_env.study.statistics import mcnemar_p, wilson_interval  # noqa: E402
@@ -33,7 +32,7 @@ def run(picker_text: str, beds: list[int], episodes: int, error: float, seed: in
     spec = parse_picker(picker_text)
     outcomes, causes, t0 = [], {}, time.perf_counter()
     for n in beds:
-        kw = {"scene": generator.SceneConfig().replace(placement__num_mushrooms=n)}
+        kw = {"scene": {"placement": {"num_mushrooms": n}}}  # the mapping form: the env completes the placement
         if error > 0:
             kw.update(pose_source="noisy", pose_error_deg=error)
         if robot is not None:
@@ -59,7 +58,7 @@ def main() -> None:
     ap.add_argument("--errors", type=float, nargs="+", default=[0.0], help="pose errors (deg)")
     ap.add_argument("--seed", type=int, default=2_000_000)
     ap.add_argument("--robot", choices=["gantry", "jaco"], default=None,
-                    help="the robot every picker acts on (default: the scripted picker's SMS3DPick-v1 gantry, "
+                    help="the robot every picker acts on (default: the scripted picker's SMS3DPick-v2 gantry, "
                          "a learned picker's own)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()

@@ -44,8 +44,10 @@ class TargetRule:
     reset).
 
     Attributes:
-        rule: ``"tallest"`` (default), ``"largest"``, ``"random"`` (each among the reachable
-            mushrooms tilted no more than ``max_tilt_deg``), or ``"index"``.
+        rule: a class of :data:`CLASS_RULES` (``"harvest_ready"``, the default: uniform among
+            the reachable caps of at least ``harvest_diameter``), ``"tallest"`` (v1's),
+            ``"largest"``, ``"random"`` (each among the reachable mushrooms tilted no more than
+            ``max_tilt_deg``), or ``"index"``.
         index: the mushroom ``rule="index"`` picks (an index into the scene's instances);
             refused with another rule, which would ignore it.
         max_tilt_deg: mushrooms whose stem axis is tilted more than this from vertical (deg)
@@ -53,7 +55,7 @@ class TargetRule:
         harvest_diameter: the smallest cap a farm picks now (m): the class rules' harvest size.
     """
 
-    rule: str = "tallest"
+    rule: str = "harvest_ready"
     index: int = 0
     max_tilt_deg: float = 45.0
     harvest_diameter: float = HARVEST_DIAMETER
