@@ -15,7 +15,7 @@ import numpy as np
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--picker", default="scripted", help="scripted, policy[:PATH] or residual:PATH")
+    p.add_argument("--picker", default="scripted", help="scripted or policy[:PATH]")
     p.add_argument("--pose-error-deg", type=float, default=0.0, help="0: oracle poses")
     p.add_argument("--episodes", type=int, default=3)
     p.add_argument("--seed", type=int, default=0, help="first episode seed")

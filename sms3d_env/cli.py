@@ -32,7 +32,6 @@ COMMANDS: dict[str, str] = {
     "sweep-compare": "sms3d_env.study.sweep",
     "record-demos": "sms3d_env.training.cli_demos",
     "train-policy": "sms3d_env.training.cli",
-    "train-trigger": "sms3d_env.training.cli",
     "eval-policy": "sms3d_env.training.cli",
     "learning-curve": "sms3d_env.training.cli",
     "demo": "sms3d_env.demo",

@@ -6,7 +6,7 @@
 | one seeded episode of any picker as the study's row (``run_episode``) | :mod:`~sms3d_env.pickers.episode` |
 | pickers by name for the study and benchmarks (``parse_picker``, ``make_picker_env``) | :mod:`~sms3d_env.pickers.registry` |
 
-Learned pickers (saved SB3 policies, residuals) are trained and loaded by :mod:`sms3d_env.training`.
+Learned pickers (saved SB3 policies) are trained and loaded by :mod:`sms3d_env.training`.
 The names load their module on first access.
 """
 

@@ -1,6 +1,5 @@
-"""Pickers by name, for the study and the benchmarks: ``"scripted"``, ``"policy[:PATH]"`` (a
-saved SB3 policy; no path: the shipped one) or ``"residual[:PATH]"`` (a residual policy on top of
-the scripted picker; no path: the shipped descend trigger). ``"policy@ENV_ID:PATH"`` names the
+"""Pickers by name, for the study and the benchmarks: ``"scripted"`` or ``"policy[:PATH]"`` (a
+saved SB3 policy; no path: the shipped one). ``"policy@ENV_ID:PATH"`` names the
 env of a model whose files do not say it (one saved by SB3's own ``save``), as ``eval-policy
 --env-id`` does.
 
@@ -17,10 +16,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-PICKER_KINDS = ("scripted", "policy", "residual")
+PICKER_KINDS = ("scripted", "policy")
+#: Picker kinds removed from the package, refused by name with why: ``"residual[:PATH]"`` ran a
+#: residual policy on top of the scripted picker (no path: the shipped descend trigger).
+REMOVED_PICKER_KINDS = {
+    "residual": "residual PPO and the learned descend trigger on top of the scripted picker were removed on "
+                "2026-12-07: residual PPO never beat the scripted picker and the trigger's gain was gone on v1 "
+                "(McNemar p >= 0.25; docs/results-training.md, \"What did not widen it\"; CHANGELOG.md; git "
+                "history keeps them); use scripted or policy[:PATH]",
+}
 #: What figures and tables call a picker by its ``PickerSpec.label``: the shipped ones by the
 #: names the documentation uses; a saved model keeps its label (kind and run folder).
-PICKER_NAMES = {"scripted": "scripted picker", "policy": "shipped policy", "residual": "learned descend trigger"}
+PICKER_NAMES = {"scripted": "scripted picker", "policy": "shipped policy"}
 
 
 #: The env the scripted picker acts in (a learned picker acts in the one it was trained on).
@@ -28,8 +35,8 @@ SCRIPTED_ENV_ID = "SMS3DPick-v2"
 
 @dataclass(frozen=True)
 class PickerSpec:
-    """``kind`` in ``PICKER_KINDS``; ``path`` the model (None: the shipped policy, or for a
-    residual the shipped descend trigger); ``env_id`` its env where its files do not say it."""
+    """``kind`` in ``PICKER_KINDS``; ``path`` the model (None: the shipped policy); ``env_id`` its
+    env where its files do not say it."""
 
     kind: str = "scripted"
     path: str | None = None
@@ -45,11 +52,11 @@ class PickerSpec:
     def model_path(self) -> Path | None:
         """The model a learned picker loads (the shipped one of its kind without a path); None
         for the scripted picker."""
-        from sms3d_env.training.actor import SHIPPED_POLICY, SHIPPED_TRIGGER
+        from sms3d_env.training.actor import SHIPPED_POLICY
 
         if self.kind == "scripted":
             return None
-        return Path(self.path) if self.path else (SHIPPED_TRIGGER if self.kind == "residual" else SHIPPED_POLICY)
+        return Path(self.path) if self.path else SHIPPED_POLICY
 
 
 def picker_name(label: str) -> str:
@@ -58,14 +65,16 @@ def picker_name(label: str) -> str:
 
 
 def parse_picker(text: str) -> PickerSpec:
-    """``"scripted"``, ``"policy[:PATH]"`` or ``"residual[:PATH]"`` (ValueError naming the picker
-    otherwise; a missing model file raises FileNotFoundError)."""
+    """``"scripted"`` or ``"policy[:PATH]"`` (ValueError naming the picker otherwise, and for a
+    removed kind why it was removed; a missing model file raises FileNotFoundError)."""
     from sms3d_env.training.policy_spec import package_env_ids
 
     name, _, path = str(text).partition(":")
     kind, at, env_id = name.partition("@")
+    if kind in REMOVED_PICKER_KINDS:
+        raise ValueError(f"picker {text!r}: {REMOVED_PICKER_KINDS[kind]}")
     if kind not in PICKER_KINDS:
-        raise ValueError(f"picker must be one of {PICKER_KINDS} (policy/residual with an optional :PATH), "
+        raise ValueError(f"picker must be one of {PICKER_KINDS} (policy with an optional :PATH), "
                          f"got {text!r}")
     if kind == "scripted" and path:
         raise ValueError(f"the scripted picker takes no model path, got {text!r}")

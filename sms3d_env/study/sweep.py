@@ -62,7 +62,7 @@ class SweepConfig:
     perception_realism: bool = False  # perception episodes see the camera with every realism effect
     chunk: int = 10  # episodes per task (one part file)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
-    picker: str = "scripted"  # "scripted", "policy[:PATH]" or "residual[:PATH]" (sms3d_env.pickers.registry)
+    picker: str = "scripted"  # "scripted" or "policy[:PATH]" (sms3d_env.pickers.registry)
 
     def __post_init__(self) -> None:
         """Raise :class:`~generator.errors.ConfigError` naming the field. Everything is checked
@@ -557,9 +557,8 @@ def register(subparsers: Any) -> None:
                    help="the perception episodes' overhead camera has every realism effect (stereo noise and "
                         "shadows, flying pixels, RGB noise, lighting, camera jitter; as `sms3d generate --realism`)")
     p.add_argument("--picker", default=SweepConfig.picker,
-                   help="scripted (default), policy (the shipped policy), policy:PATH/model.zip, residual "
-                        "(the shipped descend trigger) or residual:PATH/model.zip; every picker sees the same "
-                        "seeded episodes")
+                   help="scripted (default), policy (the shipped policy) or policy:PATH/model.zip; every "
+                        "picker sees the same seeded episodes")
     p.add_argument("--posture-target", choices=("estimate", "tool"), default="estimate",
                    help="the env's IK posture (ControllerConfig.posture_target): estimate (default) or tool; "
                         "a learned picker's own recorded option wins")

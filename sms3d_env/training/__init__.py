@@ -12,15 +12,13 @@
 | ``sms3d record-demos`` | :mod:`~sms3d_env.training.cli_demos` |
 | recipes as data: a shipped recipe or a recipe file as a config (``read_recipe``, ``Recipe``) | :mod:`~sms3d_env.training.recipes` |
 | RL Baselines3 Zoo: the recipe files (``with_recipe``) and the runs it saves (``zoo_run_of``, ``read_vecnormalize``) | :mod:`~sms3d_env.training.zoo` |
-| residual policies on top of the scripted picker (``ResidualPicker``) | :mod:`~sms3d_env.training.residual` |
-| a descend trigger learned from paired counterfactual rollouts (``TriggerConfig``, ``train_trigger``) | :mod:`~sms3d_env.training.trigger_rollouts` |
 | the shipped policies' features extractor (``NormalizedFlatten``) | :mod:`~sms3d_env.training.policy_features` |
-| a saved policy as a picker (``load_model``, ``PolicyActor``, ``SHIPPED_POLICY``, ``SHIPPED_TRIGGER``) | :mod:`~sms3d_env.training.actor` |
+| a saved policy as a picker (``load_model``, ``PolicyActor``, ``SHIPPED_POLICY``) | :mod:`~sms3d_env.training.actor` |
 | a run's files: atomic model saves, observation statistics without pickles (``ObservationStats``, ``PolicyFileError``) | :mod:`~sms3d_env.training.model_files` |
 | what a model's policy is built from instead of SB3's pickled entries (``PolicySpec``) | :mod:`~sms3d_env.training.policy_spec` |
 | success of a saved policy (``evaluate_policy_success``) | :mod:`~sms3d_env.training.evaluation` |
 | learning curves of runs (``read_curve``, ``sms3d learning-curve``) | :mod:`~sms3d_env.training.learning_curve` |
-| ``sms3d train-policy`` / ``train-trigger`` / ``eval-policy`` (``register``, ``main``; ``python -m sms3d_env.training``) | :mod:`~sms3d_env.training.cli` |
+| ``sms3d train-policy`` / ``eval-policy`` (``register``, ``main``; ``python -m sms3d_env.training``) | :mod:`~sms3d_env.training.cli` |
 
 The names load their module on first access (``sms3d --help`` pays for none of SB3 or torch).
 """
@@ -31,11 +29,10 @@ _EXPORTS = {
     "ALGOS": "config", "ENV_IDS": "config", "POSE_SOURCES": "config",
     "REWARD_TYPES": "config", "TrainConfig": "config", "env_kwargs": "config",
     "make_env": "envs", "train_policy": "rl", "WallAwareLinearSchedule": "schedules",
-    "BCConfig": "imitation", "train_bc": "imitation", "ResidualPicker": "residual",
+    "BCConfig": "imitation", "train_bc": "imitation",
     "record_datasets": "demonstrations", "labelled_steps": "demonstrations", "with_recipe": "zoo", "Recipe": "recipes", "read_recipe": "recipes",
-    "TriggerConfig": "trigger_rollouts", "train_trigger": "trigger_rollouts",
     "NormalizedFlatten": "policy_features",
-    "SHIPPED_POLICY": "actor", "SHIPPED_TRIGGER": "actor", "PolicyActor": "actor", "load_model": "actor",
+    "SHIPPED_POLICY": "actor", "PolicyActor": "actor", "load_model": "actor",
     "OBS_STATS_FILE": "model_files", "ObservationStats": "model_files", "PolicyFileError": "model_files",
     "PolicySpec": "policy_spec",
     "evaluate_policy_success": "evaluation", "success_line": "evaluation",

@@ -1,6 +1,5 @@
 """A saved pick policy as a picker: ``load_model`` and ``PolicyActor`` (observation statistics and
-the env it was trained on from the files beside it); ``SHIPPED_POLICY`` is the shipped one, and
-``SHIPPED_TRIGGER`` the shipped descend trigger (a residual picker).
+the env it was trained on from the files beside it); ``SHIPPED_POLICY`` is the shipped one.
 
 A model that RL Baselines3 Zoo saved (``python -m rl_zoo3.train``) loads too: its env, options
 and observation statistics come from the run's ``args.yml``, ``config.yml`` and
@@ -34,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from sms3d_env.env_args import translate_legacy_options
-from sms3d_env.training.config import ALGOS
+from sms3d_env.training.config import ALGOS, removed_experiment_of
 from sms3d_env.training.model_files import (
     MAX_MODEL_BYTES,
     OBS_STATS_FILE,
@@ -63,9 +62,6 @@ from sms3d_env.training.zoo import read_vecnormalize, zoo_run_of
 
 #: The shipped pick policy (``model.zip`` with its ``config.json``, ``README.md``, metrics).
 SHIPPED_POLICY = Path(__file__).parents[1] / "weights" / "pick_policy" / "model.zip"
-#: The shipped descend trigger: a trigger-only residual learned from counterfactual rollouts
-#: (:mod:`sms3d_env.training.trigger_rollouts`), with its ``config.json``, ``README.md``, metrics.
-SHIPPED_TRIGGER = Path(__file__).parents[1] / "weights" / "descend_trigger" / "model.zip"
 #: What SB3's ``VecNormalize.save`` wrote beside models before ``obs_rms.npz``: a pickle, refused.
 PICKLED_STATS_FILE = "vecnormalize.pkl"
 
@@ -380,16 +376,12 @@ class PolicyActor:
         record = self.config_path if zoo_run is None else zoo_run.params / "args.yml"
         if recorded is not None:  # an rl_zoo3 run's was checked as args.yml's env
             checked_env_id(recorded, record, "env_id")
-        # Options saved by earlier versions (e.g. the shipped trigger's posture_target) read as now.
+        # Options saved by earlier versions (e.g. a top-level posture_target) read as now.
         self.env_options = translate_legacy_options(self.saved.get("env_options", {}))
         self._check_option_names()
-        self.residual_scale = float(self.saved.get("residual_scale", 0.0))
-        for mode in ("residual_until_held", "residual_approach_only"):
-            if self.saved.get(mode):
-                raise PolicyFileError(self.config_path, f"was trained with {mode}, a residual mode removed on "
-                                                        "2026-12-06 (measured worse); sms3d-pick 0.1.0 runs it")
-        self.residual_descend_trigger = bool(self.saved.get("residual_descend_trigger", False))
-        self.residual_trigger_only = bool(self.saved.get("residual_trigger_only", False))
+        removed = removed_experiment_of(self.saved)
+        if removed:
+            raise PolicyFileError(self.config_path, f"is a residual policy: {removed}")
         # A policy trained on the flattened observation: the keys in their concatenation order.
         self.observation_keys: list[str] | None = self.saved.get("observation_keys")
         if self.saved.get("flat_observation") and self.observation_keys is None:
@@ -454,17 +446,14 @@ class PolicyActor:
         return PolicySpec(algo, policy, match.observation_space, match.action_space, env_id=match.env_id)
 
     def make_env(self, **kwargs: Any) -> Any:
-        """The env this policy runs in: its env id and options, inside the residual wrapper it
-        was trained in (if any), with ``kwargs`` (bed size, pose source, ...) for the rest. Its
-        observation is the dict one even for a policy trained on the flattened observation
-        (``__call__`` flattens it). ``PolicyFileError`` naming ``config.json`` when that env's
-        observation is not the one the policy was trained on."""
+        """The env this policy runs in: its env id and options, with ``kwargs`` (bed size, pose
+        source, ...) for the rest. Its observation is the dict one even for a policy trained on the
+        flattened observation (``__call__`` flattens it). ``PolicyFileError`` naming
+        ``config.json`` when that env's observation is not the one the policy was trained on."""
         from sms3d_env.training.envs import make_env
 
         self._check_no_conflict(kwargs)
-        env = make_env(self.env_id, self.residual_scale, self.residual_descend_trigger,
-                       residual_trigger_only=self.residual_trigger_only,
-                       **{**kwargs, **self.env_options})
+        env = make_env(self.env_id, **{**kwargs, **self.env_options})
         try:
             self._check_observation(env.observation_space)
         except PolicyFileError:

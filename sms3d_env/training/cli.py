@@ -1,5 +1,5 @@
-"""``sms3d train-policy``, ``sms3d train-trigger``, ``sms3d eval-policy`` and ``sms3d learning-curve`` (also
-``python -m sms3d_env.training ...``)."""
+"""``sms3d train-policy``, ``sms3d eval-policy`` and ``sms3d learning-curve`` (also ``python -m
+sms3d_env.training ...``)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,6 @@ from sms3d_env.training.config import (
     VEC_ENVS,
 )
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
-from sms3d_env.training.imitation import TEACHERS
 from sms3d_env.training.model_files import PolicyFileError
 from sms3d_env.training.policy_spec import package_env_ids
 from sms3d_env.training.recipes import ARTICLES, field_names
@@ -59,7 +58,6 @@ DEPRECATED_FIELD_FLAGS: dict[str, tuple[str, dict[str, Any]]] = {
     "--normalize-reward": ("normalize_reward", {"action": "store_const", "const": True}),
     "--flat-observation": ("flat_observation", {"action": "store_const", "const": True}),
     "--pose-source": ("pose_source", {"choices": POSE_SOURCES}),
-    "--residual-scale": ("residual_scale", {"type": float}),
     "--log-std-init": ("log_std_init", {"type": float}),
     "--reward-type": ("reward_type", {"choices": REWARD_TYPES}),
     "--posture-target": ("posture_target", {"choices": POSTURE_TARGETS}),
@@ -76,13 +74,10 @@ DEPRECATED_FIELD_FLAGS: dict[str, tuple[str, dict[str, Any]]] = {
     "--epochs": ("epochs", {"type": int}),
     "--dagger-rounds": ("dagger_rounds", {"type": int}),
     "--dagger-episodes": ("dagger_episodes", {"type": int}),
-    "--teacher": ("teacher", {"choices": TEACHERS}),
 }
 #: Flags of options removed on 2026-12-06 because the runs that used them measured worse
 #: (CHANGELOG.md); refused by name rather than as unknown arguments.
-REMOVED_FLAGS = {"--residual-until-held": 0, "--residual-approach-only": 0, "--residual-descend-trigger": 0,
-                 "--residual-trigger-only": 0, "--trigger-log-std": 1, "--trigger-log-std-final": 1,
-                 "--critic-warmup-steps": 1, "--time-limit-terminal": 0, "--use-sde": 0, "--sde-sample-freq": 1}
+REMOVED_FLAGS = {"--critic-warmup-steps": 1, "--time-limit-terminal": 0, "--use-sde": 0, "--sde-sample-freq": 1}
 DEPRECATION = "deprecated on 2026-12-06, removed after 2027-06-06"
 
 
@@ -110,9 +105,6 @@ def _recipe_of(args: Any) -> Any:
                   f"{'RECIPE_FILE' if flag == '--conf-file' else 'RECIPE'}", file=sys.stderr)
     flag, value = named[-1]
     recipe = default_recipe(value) if flag == "--recipe" else read_recipe(value)
-    if recipe.kind not in RECIPE_KINDS:
-        raise RecipeError(f"{recipe.source}: {ARTICLES[recipe.kind]} {recipe.kind} recipe; sms3d train-trigger "
-                          "trains it")
     given: list[tuple[str, str, Any]] = []  # (flag, field, value), applied in this order
     for old, (field, _) in DEPRECATED_FIELD_FLAGS.items():
         value = getattr(args, _dest(old))
@@ -166,38 +158,6 @@ def _cmd_train(args: Any) -> int:
         return 1
 
 
-#: ``sms3d train-trigger`` flags: flag dest → ``TriggerConfig`` field.
-TRIGGER_FIELD_FLAGS = {"out": "out", "episodes": "episodes", "seed": "seed", "num_mushrooms": "num_mushrooms",
-                       "pose_error_range": "pose_error_range_deg", "posture_target": "posture_target",
-                       "robot": "robot", "candidates": "candidates", "margin": "margin", "epochs": "epochs",
-                       "workers": "workers"}
-
-
-def _cmd_train_trigger(args: Any) -> int:
-    from sms3d_env.training.recipes import (
-        TRIGGER_KIND,
-        default_recipe,
-        parse_hyperparams,
-        read_recipe,
-    )
-    from sms3d_env.training.trigger_rollouts import train_trigger
-
-    try:
-        recipe = default_recipe(TRIGGER_KIND) if args.recipe is None else read_recipe(args.recipe)
-        if recipe.kind != TRIGGER_KIND:
-            raise RecipeError(f"{recipe.source}: {ARTICLES[recipe.kind]} {recipe.kind} recipe; sms3d train-policy "
-                              f"trains it (train-trigger trains {TRIGGER_KIND} recipes)")
-        for dest, field in TRIGGER_FIELD_FLAGS.items():
-            value = getattr(args, dest)
-            if value is not None:
-                recipe = recipe.with_fields({field: value}, f"--{dest.replace('_', '-')}")
-        recipe = recipe.with_fields(parse_hyperparams(args.hyperparams), "--set")
-    except (ValueError, FileNotFoundError) as e:  # RecipeError names the file or flag and the field
-        print(f"error: {e}")
-        return 2
-    return _summary_or_refusal(lambda: train_trigger(recipe.config, overwrite=args.overwrite))
-
-
 def _cmd_eval(args: Any) -> int:
     if args.json is not None and (not str(args.json).strip() or Path(args.json).is_dir()):
         print(f"error: argument --json: must name a file to write, got {args.json!r}")
@@ -228,14 +188,12 @@ def register(subparsers: Any) -> None:
     """Add ``sms3d train-policy``, ``sms3d eval-policy`` and ``sms3d learning-curve``."""
     import argparse
 
-    from sms3d_env.robot_names import ROBOTS
-
     p = subparsers.add_parser(
         "train-policy", help="train a pick policy from a recipe (PPO from scratch, the shipped policy's behaviour "
                              "cloning, or a recipe file)",
         description="Train a pick policy from a recipe: a shipped one by name (ppo: PPO from scratch on "
                     "SMS3DPickTrain-v1; pick_policy: the shipped policy's behaviour cloning + DAgger) or a YAML "
-                    "file (an RL Baselines3 Zoo hyperparameter file, or a mapping of `recipe: rl|residual|bc` "
+                    "file (an RL Baselines3 Zoo hyperparameter file, or a mapping of `recipe: rl|bc` "
                     "and config fields; a run's config.json is one). The flags below replace the recipe's "
                     "fields; --hyperparams replaces any other.")
     p.add_argument("recipe", nargs="?", default=None, metavar="RECIPE",
@@ -246,34 +204,34 @@ def register(subparsers: Any) -> None:
     p.add_argument("--overwrite", action="store_true",
                    help="empty --out and start anew when it holds a run made with other settings")
     p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--env-id", choices=ENV_IDS, default=None, help="rl/residual: the env to train on")
-    p.add_argument("--steps", type=int, default=None, help="rl/residual: total env steps")
+    p.add_argument("--env-id", choices=ENV_IDS, default=None, help="rl: the env to train on")
+    p.add_argument("--steps", type=int, default=None, help="rl: total env steps")
     p.add_argument("--max-wall-s", type=float, default=None,
-                   help="rl/residual: stop after this many seconds (after the current step)")
-    p.add_argument("--n-envs", type=int, default=None, help="rl/residual: envs stepped together (see --vec-env)")
+                   help="rl: stop after this many seconds (after the current step)")
+    p.add_argument("--n-envs", type=int, default=None, help="rl: envs stepped together (see --vec-env)")
     p.add_argument("--vec-env", choices=VEC_ENVS, default=None,
-                   help="rl/residual: subproc: one worker process per env; dummy: all envs in the training "
+                   help="rl: subproc: one worker process per env; dummy: all envs in the training "
                         "process (no pipe round trip per step; leaves a core free)")
     p.add_argument("--num-mushrooms", type=int, nargs="+", default=None,
                    help="mushrooms per training bed (bc: the bed sizes its demonstrations cycle through)")
     p.add_argument("--scene-pool", type=int, default=None,
-                   help="rl/residual: draw training beds from a pool of this many (0: a new bed per reset)")
+                   help="rl: draw training beds from a pool of this many (0: a new bed per reset)")
     p.add_argument("--pose-error-deg", type=float, default=None,
                    help="train under this orientation error of the pose estimate, degrees (0: exact poses)")
     p.add_argument("--pose-error-range", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                    help="train under an orientation error drawn per episode in [LOW, HIGH] degrees")
     p.add_argument("--init-model", default=None, metavar="PATH",
-                   help="rl/residual (PPO): start from this saved model (model.zip, a checkpoint or "
+                   help="rl (PPO): start from this saved model (model.zip, a checkpoint or "
                         "best/best_model.zip; its observation statistics too) instead of a fresh policy")
     p.add_argument("--demos", nargs="+", default=None, metavar="DATASET_ID",
                    help="bc: clone these Minari datasets (sms3d record-demos, on SMS3DPickTrain-v1; found under "
                         "MINARI_DATASETS_PATH) instead of recording demonstrations into --out/datasets")
     p.add_argument("--eval-freq", type=int, default=None,
-                   help="rl/residual: env steps between evaluations (0: none)")
+                   help="rl: env steps between evaluations (0: none)")
     p.add_argument("--eval-episodes", type=int, default=None,
-                   help="rl/residual: episodes per periodic evaluation")
+                   help="rl: episodes per periodic evaluation")
     p.add_argument("--checkpoint-freq", type=int, default=None,
-                   help="rl/residual: env steps between checkpoints (0: none)")
+                   help="rl: env steps between checkpoints (0: none)")
     p.add_argument("--hyperparams", "--set", nargs="+", default=[], metavar="KEY=VALUE",
                    help="replace any other field of the recipe, e.g. learning_rate=1e-4 net_arch=[64,64] "
                         "(values read as YAML; the fields: docs/training.md; --set as in train-pose)")
@@ -286,48 +244,6 @@ def register(subparsers: Any) -> None:
         p.add_argument(flag, dest=_dest(flag), default=None, help=argparse.SUPPRESS,
                        **({"nargs": nargs} if nargs else {"action": "store_const", "const": True}))
     p.set_defaults(func=_cmd_train)
-
-    from sms3d_env.training.trigger_rollouts import TriggerConfig
-
-    tdef = TriggerConfig()
-    t = subparsers.add_parser(
-        "train-trigger", help="learn when to give up on the scripted approach and descend, from paired "
-                              "counterfactual rollouts (a trigger-only residual; sms3d_env.training.trigger_rollouts)",
-        description="Learn the descend trigger from a recipe (descend_trigger: the shipped one, for the Jaco; "
-                    "or a YAML file of `recipe: trigger-rollouts` and TriggerConfig fields; a run's config.json "
-                    "is one); without one, TriggerConfig's defaults. The flags replace the recipe's fields.")
-    t.add_argument("recipe", nargs="?", default=None, metavar="RECIPE",
-                   help="a shipped recipe (descend_trigger) or a recipe file")
-    t.add_argument("--out", default=None,
-                   help=f"run folder (labels/, model.zip, config.json, summary.json; default {tdef.out}); a rerun "
-                        "with the same settings resumes it (--episodes may grow: the missing labels are collected), "
-                        "other settings are refused (see --overwrite)")
-    t.add_argument("--overwrite", action="store_true",
-                   help="empty --out and start anew when it holds a run made with other settings")
-    t.add_argument("--episodes", type=int, default=None,
-                   help=f"training episodes, one seed each (default {tdef.episodes})")
-    t.add_argument("--seed", type=int, default=None,
-                   help=f"first episode seed (default {tdef.seed}; the study's held-out episodes start at 1000000)")
-    t.add_argument("--num-mushrooms", type=int, default=None, help=f"mushrooms per bed (default {tdef.num_mushrooms})")
-    t.add_argument("--pose-error-range", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
-                   help="orientation error drawn per episode in [LOW, HIGH] degrees (default "
-                        f"{tdef.pose_error_range_deg[0]:g} {tdef.pose_error_range_deg[1]:g})")
-    t.add_argument("--posture-target", choices=POSTURE_TARGETS, default=None,
-                   help=f"the IK posture option (default {tdef.posture_target})")
-    t.add_argument("--robot", choices=ROBOTS, default=None,
-                   help=f"the robot the trigger learns to act on (SMS3DPick-v1's; default {tdef.robot})")
-    t.add_argument("--candidates", type=int, default=None,
-                   help=f"most replays per episode, each firing the trigger at one step within its reach "
-                        f"(default {tdef.candidates})")
-    t.add_argument("--margin", type=float, default=None,
-                   help=f"the expected gain in success probability the policy needs to fire (default {tdef.margin})")
-    t.add_argument("--epochs", type=int, default=None, help=f"regression epochs (default {tdef.epochs})")
-    t.add_argument("--workers", type=int, default=None,
-                   help=f"processes collecting the labels (default {tdef.workers})")
-    t.add_argument("--set", "--hyperparams", dest="hyperparams", nargs="+", default=[], metavar="KEY=VALUE",
-                   help="replace any other field of the recipe, e.g. learning_rate=3e-4 net_arch=[128,128] (values "
-                        "read as YAML)")
-    t.set_defaults(func=_cmd_train_trigger)
 
     e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "
                                                   "(default: the shipped one)")

@@ -61,9 +61,6 @@ def _env_and_expert(args: Any, spec: Any) -> tuple[Any, Any]:
     from sms3d_env.training.actor import PolicyActor
 
     actor = PolicyActor(spec.model_path)
-    if actor.residual_scale > 0:
-        raise ValueError(f"--picker {args.picker}: a residual policy's actions are corrections inside its "
-                         "wrapper, not the env's commands; record the scripted picker or a policy that acts alone")
     if args.env_id is not None and args.env_id != actor.env_id:
         raise ValueError(f"--env-id {args.env_id}: the policy {spec.model_path} acts on {actor.env_id}")
     return actor.make_env(**kw), (lambda _env: actor)
@@ -78,9 +75,6 @@ def _cmd_record(args: Any) -> int:
         return 2
     try:
         spec = parse_picker(args.picker)
-        if spec.kind == "residual":
-            raise ValueError(f"--picker {args.picker}: a residual picker's actions are corrections inside its "
-                             "wrapper, not the env's commands; record the scripted picker or a policy")
         from sms3d_env.training.demonstrations import (
             check_dataset_id,
             check_not_namespace,

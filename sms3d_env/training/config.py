@@ -38,20 +38,50 @@ def env_options(posture_target: str = "estimate") -> dict[str, Any]:
     return {} if posture_target == "estimate" else {"controller": {"posture_target": posture_target}}
 
 
-#: Fields of earlier versions, removed because the runs that used them measured worse (what
-#: replaced them and the measurement: CHANGELOG.md, "Removed (2026-12-06)").
+#: Experiments removed from the package on 2026-12-07 because they measured no gain (CHANGELOG.md,
+#: Unreleased, "Removed"; docs/results-training.md; git history keeps their code): what the
+#: refusal of a recipe, a run, a picker name or a field that asks for one says.
+REMOVED_EXPERIMENTS = {
+    "residual": "residual PPO on top of the scripted picker was removed on 2026-12-07: it never beat the "
+                "scripted picker (at best 88 / 85 % against 83 / 85 % at 20 / 30 deg, p 0.06 / 1.0; "
+                "docs/results-training.md; git history keeps it)",
+    "trigger": "the learned descend trigger (sms3d train-trigger, --picker residual) was removed on 2026-12-07: "
+               "on v1 it picked no more than the scripted picker (McNemar p >= 0.25; docs/results-training.md; "
+               "git history keeps it)",
+    "teacher": "the privileged teacher (teacher: truth) was removed on 2026-12-07: its clone picked 24 % at 30 deg "
+               "against the scripted picker's 78 % (docs/results-training.md; git history keeps it)",
+}
+
+
+def removed_experiment_of(saved: dict[str, Any]) -> str | None:
+    """Why a run's ``config.json`` cannot be used when its run was a removed experiment (a residual
+    or the descend trigger, whose actions corrected the scripted picker's in a removed wrapper);
+    None for any other run."""
+    if not saved.get("residual_scale"):
+        return None
+    return REMOVED_EXPERIMENTS["trigger" if saved.get("residual_descend_trigger") else "residual"]
+
+
+#: Fields of earlier versions, removed because the runs that used them measured worse or served a
+#: removed experiment (what replaced them and the measurement: CHANGELOG.md, "Removed").
 REMOVED_FIELDS = {
-    name: "removed on 2026-12-06 (measured worse; sms3d-pick 0.1.0 still has it)"
-    for name in ("residual_until_held", "residual_approach_only", "residual_descend_trigger",
-                 "residual_trigger_only", "trigger_log_std", "trigger_log_std_final", "time_limit_terminal",
-                 "critic_warmup_steps", "use_sde", "sde_sample_freq")}
+    **{name: "removed on 2026-12-06 (measured worse; sms3d-pick 0.1.0 still has it)"
+       for name in ("residual_until_held", "residual_approach_only", "residual_descend_trigger",
+                    "residual_trigger_only", "trigger_log_std", "trigger_log_std_final", "time_limit_terminal",
+                    "critic_warmup_steps", "use_sde", "sde_sample_freq")},
+    "residual_scale": REMOVED_EXPERIMENTS["residual"],
+    "teacher": REMOVED_EXPERIMENTS["teacher"],
+}
+#: What older runs record for a removed field left at its default, besides None, False, 0 and -1.
+REMOVED_FIELD_DEFAULTS = {"teacher": "estimate"}
 
 
 def removed_fields_set(values: dict[str, Any]) -> list[str]:
     """The :data:`REMOVED_FIELDS` that ``values`` (a run's config.json, a recipe) sets to anything
-    but their old defaults (None, False, 0, -1: what older runs record for an option left off)."""
+    but their old defaults (None, False, 0, -1 or :data:`REMOVED_FIELD_DEFAULTS`: what older runs
+    record for an option left off)."""
     return sorted(name for name, value in values.items() if name in REMOVED_FIELDS
-                  and value not in (None, False, 0, -1))
+                  and value not in (None, False, 0, -1, REMOVED_FIELD_DEFAULTS.get(name)))
 
 
 @dataclass(frozen=True)
@@ -91,8 +121,6 @@ class TrainConfig:
             (docs/results-training.md).
         scene_pool: > 0: each env draws its beds from a pool of this many
             (``SceneSourceConfig.pool``; resets then cost physics, not placement and compilation).
-        residual_scale: > 0 trains a residual on top of the scripted picker
-            (:class:`sms3d_env.training.residual.ResidualPicker` with this scale); 0: the policy acts alone.
         pose_error_range_deg: ``(low, high)``: train under a pose error drawn per episode
             uniformly in that range (the env's ``pose_error_deg=(low, high)``; ``pose_source``
             must then be ``"noisy"``, ``pose_error_deg`` and ``position_noise`` 0).
@@ -116,9 +144,7 @@ class TrainConfig:
             Needs ``learning_rate_final`` and ``max_wall_s``; makes the rate depend on the
             machine's speed.
         target_kl: PPO stops a round of updates early once the approximate KL divergence from the
-            rollout's policy exceeds 1.5 x this (None: no limit, SB3's default). A residual on a
-            working controller needs it: without one its updates ran at KL 0.03-0.07 and undid
-            seals the scripted picker made.
+            rollout's policy exceeds 1.5 x this (None: no limit, SB3's default).
         posture_target: the env's IK posture (``ControllerConfig.posture_target``),
             ``"estimate"`` (default) or ``"tool"`` (re-solved as the tool turns; lets a policy
             correct a wrong estimate). Saved in ``config.json`` as ``env_options`` so that
@@ -137,7 +163,7 @@ class TrainConfig:
             and ``pregrasp_anneal``'s success window (the share is back at ``pregrasp_start``
             until 10 home-start episodes have ended).
         log_std_init: the Gaussian policy's initial log standard deviation (SB3's default 0: a
-            standard deviation of 1 on every normalised command; a residual starts quieter).
+            standard deviation of 1 on every normalised command).
         torch_threads: ``torch.set_num_threads`` in the training process. 1 by default: the
             policy's per-step forward pass is tiny, and with the env workers (and anything else)
             on the same cores, 2 intra-op threads made it ~50x slower here (64 ms vs 1.2 ms).
@@ -148,7 +174,6 @@ class TrainConfig:
     normalize: bool = False
     normalize_reward: bool = False
     scene_pool: int = 0
-    residual_scale: float = 0.0
     pose_error_range_deg: tuple[float, float] | None = None
     total_steps: int = 100_000
     max_wall_s: float | None = None
@@ -209,9 +234,6 @@ class TrainConfig:
             raise bad("vec_env", f"must be one of {VEC_ENVS}")
         if not isinstance(self.flat_observation, bool):
             raise bad("flat_observation", "must be a bool")
-        if not (isinstance(self.residual_scale, (int, float)) and math.isfinite(self.residual_scale)
-                and 0 <= self.residual_scale <= 2):
-            raise bad("residual_scale", "must be a number in [0, 2]")
         if self.pose_error_range_deg is not None:
             rng = tuple(float(v) for v in self.pose_error_range_deg)
             if len(rng) != 2 or not all(math.isfinite(v) for v in rng) or not 0 <= rng[0] <= rng[1] <= 180:
@@ -297,8 +319,7 @@ class TrainConfig:
         if self.pregrasp_start and not evaluation:
             kw["start"] = PregraspStart(float(self.pregrasp_start))
         kw.update(env_options(self.posture_target))
-        return {"env_id": self.env_id, "residual_scale": self.residual_scale,
-                "flat_observation": self.flat_observation, **kw}
+        return {"env_id": self.env_id, "flat_observation": self.flat_observation, **kw}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:

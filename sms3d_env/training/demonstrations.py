@@ -192,8 +192,9 @@ def open_dataset(dataset_id: str) -> Any:
 
 
 def with_true_target(env: Any, obs: dict[str, np.ndarray], target: int) -> dict[str, np.ndarray]:
-    """``obs`` with the target's true cap top and stem axis in ``target_pose`` (what a privileged
-    teacher reads; the scripted picker reads nothing that depends on the estimate besides it)."""
+    """``obs`` with the target's true cap top and stem axis in ``target_pose`` (the scripted picker
+    reads nothing that depends on the estimate besides it; ``benchmarks/bench_tolerance_headroom.py``
+    drives it so)."""
     inst = env.unwrapped.scene.instances[target]
     return {**obs, "target_pose": np.concatenate([np.asarray(inst.cap_top, float),
                                                   np.asarray(inst.rotation, float)[:, 2]])}
@@ -204,16 +205,14 @@ class ExpertLabels(gym.Wrapper):
     ``expert_acting``, ``label_valid``; see the module's table).
 
     ``make_expert(env)`` builds the expert at each reset: a callable ``obs -> action`` (the
-    scripted picker, a saved policy) or, with ``privileged``, ``(obs, true_obs) -> action`` (the
-    privileged teacher, given the true target pose too). Set ``expert_acting`` before a reset to
+    scripted picker, a saved policy). Set ``expert_acting`` before a reset to
     say who acts in that episode. The wrapper's spec is the env's: the labels belong to the
     recording, so a dataset's ``recover_environment()`` builds the env alone.
     """
 
-    def __init__(self, env: gym.Env, make_expert: Callable[[gym.Env], Callable[..., np.ndarray]],
-                 privileged: bool = False) -> None:
+    def __init__(self, env: gym.Env, make_expert: Callable[[gym.Env], Callable[..., np.ndarray]]) -> None:
         super().__init__(env)
-        self.make_expert, self.privileged = make_expert, privileged
+        self.make_expert = make_expert
         self.expert_acting = True
         self.expert: Callable[..., np.ndarray] | None = None
         self._sealed = False
@@ -232,8 +231,7 @@ class ExpertLabels(gym.Wrapper):
         return obs, reward, terminated, truncated, self._labelled(obs, info)
 
     def _labelled(self, obs: dict[str, np.ndarray], info: dict[str, Any]) -> dict[str, Any]:
-        label = (self.expert(obs, with_true_target(self.env, obs, info["target"])) if self.privileged
-                 else self.expert(obs))
+        label = self.expert(obs)
         key, entry = _SEAL_FLAG
         self._sealed |= bool(obs[key][entry] > 0.5)
         valid = self.expert_acting or getattr(self.expert, "phase", None) != "lift" or self._sealed
@@ -303,7 +301,7 @@ def check_recordable(env: gym.Env) -> None:
 def record_datasets(targets: Sequence[tuple[str, gym.Env]], make_expert: Callable[[gym.Env], Callable[..., Any]],
                     seeds: Sequence[int], recording: dict[str, Any], *, actor: Callable[[Any], Any] | None = None,
                     beta: float = 1.0, action_noise: float = 0.0, rng: np.random.Generator | None = None,
-                    privileged: bool = False, desc: str = "recording", progress: bool = True) -> list[Any]:
+                    desc: str = "recording", progress: bool = True) -> list[Any]:
     """Record episodes into new Minari datasets under :func:`datasets_root`, one per
     ``(dataset_id, env)`` of ``targets``: episode ``i`` runs ``reset(seed=seeds[i])`` in target
     ``i % len(targets)``. Returns the datasets, in the order of ``targets``.
@@ -328,7 +326,7 @@ def record_datasets(targets: Sequence[tuple[str, gym.Env]], make_expert: Callabl
             raise DatasetError(f"a Minari dataset {dataset_id!r} exists in {datasets_root()}; choose another id or "
                                "delete it (sms3d record-demos --overwrite)")
     rng = np.random.default_rng(seeds[0] if len(seeds) else 0) if rng is None else rng
-    labellers = [ExpertLabels(env, make_expert, privileged) for _, env in targets]
+    labellers = [ExpertLabels(env, make_expert) for _, env in targets]
     root = datasets_root()
     remove_orphaned_temporaries(root)
     with minari_root(temp_path(root / RECORDING_CACHE)):  # where each DataCollector makes its cache

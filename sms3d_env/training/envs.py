@@ -1,5 +1,5 @@
-"""The training envs: one pick env (``make_env``, optionally inside a ``ResidualPicker``),
-vectorised (``vec_env``) and with standardised observations (``normalized``)."""
+"""The training envs: one pick env (``make_env``), vectorised (``vec_env``) and with
+standardised observations (``normalized``)."""
 
 from __future__ import annotations
 
@@ -8,23 +8,15 @@ from pathlib import Path
 from typing import Any
 
 
-def make_env(env_id: str = "SMS3DPick-v1", residual_scale: float = 0.0, residual_descend_trigger: bool = False,
-             residual_trigger_only: bool = False, flat_observation: bool = False, **kwargs: Any) -> Any:
-    """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it; ``residual_scale``
-    > 0 wraps the env in a ``ResidualPicker`` (``descend_trigger=residual_descend_trigger``,
-    ``trigger_only=residual_trigger_only``: the learned descend trigger's); ``flat_observation``
-    flattens the dict observation into one vector (gymnasium's ``FlattenObservation``,
-    outermost)."""
+def make_env(env_id: str = "SMS3DPick-v1", flat_observation: bool = False, **kwargs: Any) -> Any:
+    """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it;
+    ``flat_observation`` flattens the dict observation into one vector (gymnasium's
+    ``FlattenObservation``, outermost)."""
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the env ids)
 
     env = gym.make(env_id, **kwargs)
-    if residual_scale > 0:
-        from sms3d_env.training.residual import ResidualPicker
-
-        env = ResidualPicker(env, residual_scale, descend_trigger=residual_descend_trigger,
-                             trigger_only=residual_trigger_only)
     if flat_observation:
         env = gym.wrappers.FlattenObservation(env)
     return env

@@ -2,13 +2,6 @@
 stable-baselines3 policy (PPO's ``MultiInputPolicy``, so that ``PPO.load`` and RL fine-tuning
 take it as it is).
 
-Under pose error the teacher can be *privileged* (``teacher="truth"``, after Chen et al. 2019,
-"Learning by Cheating"): :class:`~sms3d_env.pickers.privileged.PrivilegedTeacher` decides its
-phases on the observation as the scripted picker does, but descends and twists along the true
-stem axis, while the clone sees only the estimate, the wrist wrench and the rest of the
-observation; the clone learns what those say about the true pose instead of copying a picker that
-trusts the estimate.
-
 Demonstrations are collected DART-style (Laskey et al. 2017, "DART: Noise Injection for Robust
 Imitation Learning"): the scripted picker acts with Gaussian noise added to its twist command and
 every visited state is labelled with the picker's *clean* action, so the clone sees (and learns to
@@ -45,7 +38,6 @@ from sms3d_env.training.config import POSTURE_TARGETS, check_bed_size, env_optio
 from sms3d_env.training.model_files import finished_run, run_settings, save_model
 
 TRAIN_ENV_ID = "SMS3DPickTrain-v2"
-TEACHERS = ("estimate", "truth")
 
 
 class NonFiniteLossError(RuntimeError):
@@ -70,10 +62,6 @@ class BCConfig:
         pose_error_deg: the noisy pose source's rotation error while collecting (0: oracle).
         pose_error_range_deg: ``(low, high)``: a rotation error drawn per episode in this range
             instead (excludes ``pose_error_deg``).
-        teacher: ``"estimate"``: the scripted picker acts and labels from the observed
-            (estimated) pose, as it would on a robot; ``"truth"``: the privileged teacher, whose
-            descent and twist follow the true pose (used only while training; the clone still
-            sees only the observation).
         posture_target: the env's IK posture option (``SMS3DPickEnv``): ``"tool"`` lets a picker
             that corrects a wrong estimate move away from the estimate's arm configuration;
             recorded in ``config.json`` with the other env options.
@@ -95,7 +83,6 @@ class BCConfig:
     action_noise: float = 0.2
     pose_error_deg: float = 0.0
     pose_error_range_deg: tuple[float, float] | None = None
-    teacher: str = "estimate"
     posture_target: str = "estimate"
     epochs: int = 40
     batch_size: int = 512
@@ -152,8 +139,6 @@ class BCConfig:
             object.__setattr__(self, "pose_error_range_deg", low_high)
         if self.posture_target not in POSTURE_TARGETS:
             raise bad("posture_target", f"must be one of {POSTURE_TARGETS}")
-        if self.teacher not in TEACHERS:
-            raise bad("teacher", f"must be one of {TEACHERS}")
         if not (isinstance(self.learning_rate, (int, float)) and 0 < self.learning_rate < 1):
             raise bad("learning_rate", "must be in (0, 1)")
         if not (isinstance(self.log_std, (int, float)) and math.isfinite(self.log_std)):
@@ -181,28 +166,18 @@ def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
     return kw
 
 
-def _teacher(teacher: str) -> Any:
-    """What builds ``teacher``'s expert on an episode's env (the scripted picker, or the privileged
-    teacher for ``"truth"``)."""
-    from sms3d_env.pickers.privileged import PrivilegedTeacher
-    from sms3d_env.pickers.scripted import ScriptedPicker
-
-    return ScriptedPicker.for_env if teacher == "estimate" else PrivilegedTeacher
-
-
 def _record(cfg: BCConfig, targets: list[tuple[str, Any]], seeds: range, actor: Any = None, beta: float = 1.0,
             desc: str = "demonstrations", progress: bool = True) -> list[Any]:
-    """Episodes ``seeds`` labelled by ``cfg.teacher`` into new datasets ``targets`` (``(id, env)``
-    pairs, episodes cycled over them): the expert acts with DART noise in an episode with
-    probability ``beta``, else ``actor`` does while the expert labels its states (DAgger)."""
+    """Episodes ``seeds`` labelled by the scripted picker into new datasets ``targets`` (``(id,
+    env)`` pairs, episodes cycled over them): the picker acts with DART noise in an episode with
+    probability ``beta``, else ``actor`` does while the picker labels its states (DAgger)."""
+    from sms3d_env.pickers.scripted import ScriptedPicker
     from sms3d_env.training.demonstrations import record_datasets
 
-    return record_datasets(targets, _teacher(cfg.teacher), seeds,
-                           {"picker": "scripted" if cfg.teacher == "estimate" else "privileged teacher",
-                            "teacher": cfg.teacher, "made_by": "sms3d train-policy --recipe bc"},
+    return record_datasets(targets, ScriptedPicker.for_env, seeds,
+                           {"picker": "scripted", "made_by": "sms3d train-policy --recipe bc"},
                            actor=actor, beta=beta, action_noise=cfg.action_noise,
-                           rng=np.random.default_rng([cfg.seed, seeds.start]), privileged=cfg.teacher == "truth",
-                           desc=desc, progress=progress)
+                           rng=np.random.default_rng([cfg.seed, seeds.start]), desc=desc, progress=progress)
 
 
 def _reuse_or_record(ids: list[str], record: Any) -> list[Any]:

@@ -6,9 +6,9 @@ Two forms are read (the shipped recipes are ``sms3d_env/recipes/<name>.yml``):
 - an **RL Baselines3 Zoo hyperparameter file**, keyed by env id (``ppo.yml``), which
   ``python -m rl_zoo3.train`` reads too; its keys map onto :class:`TrainConfig` fields as
   :func:`~sms3d_env.training.zoo.recipe_fields` says. Kind ``rl``.
-- a **config mapping**: ``recipe:`` (``rl``, ``residual`` or ``bc``) and the fields of the
-  kind's config class, :class:`TrainConfig` (``rl``, ``residual``) or
-  :class:`~sms3d_env.training.imitation.BCConfig` (``bc``), by their names — the keys a run's
+- a **config mapping**: ``recipe:`` (``rl`` or ``bc``) and the fields of the kind's config
+  class, :class:`TrainConfig` (``rl``) or :class:`~sms3d_env.training.imitation.BCConfig`
+  (``bc``), by their names — the keys a run's
   ``config.json`` holds (``pick_policy.yml`` equals the shipped policy's).
 
 A recipe's fields may then be replaced one by one (:meth:`Recipe.with_fields`: the command's
@@ -25,22 +25,26 @@ from typing import Any
 
 from generator.config_file import parse_config_value
 from generator.errors import ConfigError
-from sms3d_env.training.config import REMOVED_FIELDS, TrainConfig, removed_fields_set
+from sms3d_env.training.config import (
+    REMOVED_EXPERIMENTS,
+    REMOVED_FIELDS,
+    TrainConfig,
+    removed_fields_set,
+)
 from sms3d_env.training.zoo import RecipeError, read_zoo_yaml, recipe_fields, recipe_path
 
-#: What ``sms3d train-policy`` trains: PPO/SAC from scratch, a residual on the scripted picker,
-#: or behaviour cloning of the scripted picker with DAgger. ``sms3d train-trigger`` trains the
-#: fourth kind, ``trigger-rollouts`` (:mod:`~sms3d_env.training.trigger_rollouts`).
-KINDS = ("rl", "residual", "bc")
-TRIGGER_KIND = "trigger-rollouts"
+#: What ``sms3d train-policy`` trains: PPO/SAC from scratch, or behaviour cloning of the scripted
+#: picker with DAgger.
+KINDS = ("rl", "bc")
+#: Recipe kinds of experiments removed from the package: kind → why (a recipe or a run's
+#: ``config.json`` of that kind is refused with it).
+REMOVED_KINDS = {"residual": REMOVED_EXPERIMENTS["residual"], "trigger-rollouts": REMOVED_EXPERIMENTS["trigger"]}
 #: How messages name a recipe of each kind ("an rl recipe").
-ARTICLES = {"rl": "an", "residual": "a", "bc": "a", TRIGGER_KIND: "a"}
+ARTICLES = {"rl": "an", "bc": "a"}
 #: Keys of a run's ``config.json`` that the trainer derives from the fields (or fixes) rather than
 #: reads: a ``config.json`` is a recipe of its run, and these are skipped.
-RECORD_ONLY_KEYS = {"rl": ("env_options", "observation_keys"), "residual": ("env_options", "observation_keys"),
-                    "bc": ("env_options", "algo", "env_id", "max_episode_steps"),
-                    TRIGGER_KIND: ("env_options", "algo", "env_id", "max_episode_steps", "residual_scale",
-                                   "residual_descend_trigger", "residual_trigger_only")}
+RECORD_ONLY_KEYS = {"rl": ("env_options", "observation_keys"),
+                    "bc": ("env_options", "algo", "env_id", "max_episode_steps")}
 
 
 def _config_class(kind: str) -> type:
@@ -48,10 +52,6 @@ def _config_class(kind: str) -> type:
         from sms3d_env.training.imitation import BCConfig
 
         return BCConfig
-    if kind == TRIGGER_KIND:
-        from sms3d_env.training.trigger_rollouts import TriggerConfig
-
-        return TriggerConfig
     return TrainConfig
 
 
@@ -85,20 +85,16 @@ class Recipe:
 
 
 def default_recipe(kind: str) -> Recipe:
-    """The kind's defaults: its config class's, with a residual on ``SMS3DPickTrain-v1``, its
-    observations standardised and its policy's noise at exp(-1.6) ≈ 0.2 (a residual starts
-    near the scripted picker)."""
-    if kind not in (*KINDS, TRIGGER_KIND):
-        raise RecipeError(f"recipe kind {kind!r}: must be one of {', '.join((*KINDS, TRIGGER_KIND))}")
-    if kind == "residual":
-        config = TrainConfig(env_id="SMS3DPickTrain-v1", normalize=True, residual_scale=0.5, log_std_init=-1.6)
-    else:
-        config = _config_class(kind)()
-    return Recipe(kind, f"the {kind} defaults", config)
+    """The kind's defaults: its config class's."""
+    if kind in REMOVED_KINDS:
+        raise RecipeError(f"recipe kind {kind!r}: {REMOVED_KINDS[kind]}")
+    if kind not in KINDS:
+        raise RecipeError(f"recipe kind {kind!r}: must be one of {', '.join(KINDS)}")
+    return Recipe(kind, f"the {kind} defaults", _config_class(kind)())
 
 
 def read_recipe(name_or_path: str | Path) -> Recipe:
-    """A shipped recipe by name (``"ppo"``, ``"pick_policy"``, ``"descend_trigger"``) or a recipe
+    """A shipped recipe by name (``"ppo"``, ``"pick_policy"``) or a recipe
     file (either form; a run's ``config.json`` is one);
     ``FileNotFoundError`` naming it when there is neither, ``RecipeError`` naming the file and
     key for anything it cannot follow."""
@@ -111,16 +107,16 @@ def read_recipe(name_or_path: str | Path) -> Recipe:
         except ValueError as exc:
             raise RecipeError(f"{path}: {exc}") from None
     kind = data.pop("recipe")
-    if kind not in (*KINDS, TRIGGER_KIND):
-        raise RecipeError(f"{path}: recipe: must be one of {', '.join((*KINDS, TRIGGER_KIND))}, got {kind!r}")
+    if kind in REMOVED_KINDS:
+        raise RecipeError(f"{path}: recipe: {kind}: {REMOVED_KINDS[kind]}")
+    if kind not in KINDS:
+        raise RecipeError(f"{path}: recipe: must be one of {', '.join(KINDS)}, got {kind!r}")
     values = {k: v for k, v in data.items() if k not in RECORD_ONLY_KEYS[kind]}
     removed = removed_fields_set(values)
     if removed:
         raise RecipeError(f"{path}: {removed[0]}: {REMOVED_FIELDS[removed[0]]}")
     values = {k: v for k, v in values.items() if k not in REMOVED_FIELDS}  # older runs record them at defaults
     recipe = default_recipe(kind).with_fields(values, str(path))
-    if (kind == "residual") != (getattr(recipe.config, "residual_scale", 0.0) > 0):
-        raise RecipeError(f"{path}: residual_scale: must be > 0 for a residual recipe and 0 for an rl one")
     return replace(recipe, source=str(path))
 
 

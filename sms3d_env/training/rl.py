@@ -38,7 +38,7 @@ from sms3d_env.training.actor import (
     read_saved_config,
     saved_config_path,
 )
-from sms3d_env.training.config import TrainConfig, env_options
+from sms3d_env.training.config import TrainConfig, env_options, removed_experiment_of
 from sms3d_env.training.curriculum import pregrasp_annealing
 from sms3d_env.training.envs import normalized, vec_env
 from sms3d_env.training.model_files import (
@@ -104,9 +104,9 @@ def _check_init_model(cfg: TrainConfig) -> None:
                              "a continued run needs an out of its own")
     saved = saved_config_path(path)
     saved_cfg = {} if saved is None else read_saved_config(saved)
-    if saved_cfg.get("residual_descend_trigger"):
-        raise InitModelError(f"TrainConfig.init_model: {path} is a learned descend trigger (sms3d train-trigger), "
-                             "whose action is the trigger; a run continues a pick policy of 7 actions")
+    removed = removed_experiment_of(saved_cfg)
+    if removed:
+        raise InitModelError(f"TrainConfig.init_model: {path} is a residual policy: {removed}")
     flat = bool(saved_cfg.get("flat_observation", False))
     if flat != cfg.flat_observation:
         raise InitModelError(f"TrainConfig.init_model: {path} was trained on "
@@ -400,7 +400,7 @@ def _train(cfg: TrainConfig, overwrite: bool) -> dict[str, Any]:
 
     if cfg.init_model is not None:
         _check_init_model_fits(cfg)
-    saved = {"recipe": "residual" if cfg.residual_scale else "rl", **asdict(cfg),
+    saved = {"recipe": "rl", **asdict(cfg),
              "env_options": env_options(cfg.posture_target)}
     if cfg.flat_observation:
         saved["observation_keys"] = _observation_keys(cfg)

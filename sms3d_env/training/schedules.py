@@ -1,5 +1,4 @@
-"""Schedules for runs that a wall-clock limit may stop before their last step: the learning rate,
-and the descend trigger's exploration noise.
+"""Schedules for runs that a wall-clock limit may stop before their last step: the learning rate.
 
 SB3 drives a schedule by ``progress_remaining``, the share of ``total_steps`` still to run. A run
 stopped by ``max_wall_s`` never sees the end of that schedule: measured, a rate meant to fall

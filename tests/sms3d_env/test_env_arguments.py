@@ -28,7 +28,7 @@ from sms3d_env.rewards import RewardConfig
 from sms3d_env.scene_source import SceneSourceConfig, scene_source_config
 from sms3d_env.start_states import PregraspStart
 from sms3d_env.targets import TargetRule
-from sms3d_env.training.actor import SHIPPED_TRIGGER, PolicyActor
+from sms3d_env.training.actor import SHIPPED_POLICY, PolicyActor
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=6)
 #: SMALL in the mapping form, and the config it gives where mushrooms collide (v2, the class
@@ -154,19 +154,24 @@ def test_scene_and_pool_exclude_fixed_scenes():
         SceneSourceConfig(config={"placement": {"num_mushroomz": 3}})
 
 
-def test_the_shipped_triggers_saved_options_translate_to_the_controller():
-    saved = json.loads((SHIPPED_TRIGGER.parent / "config.json").read_text())["env_options"]
-    assert saved["posture_target"] == "tool"  # the earlier form, as the file was written
-    assert translate_legacy_options(saved) == {"reward_type": "staged", "suction_mode": "latched",
-                                               "end_on_dead_end": True, "task_obs": True, "robot": "jaco",
-                                               "controller": {"posture_target": "tool"}}
-    actor = PolicyActor(SHIPPED_TRIGGER)
+def test_a_saved_policys_earlier_posture_option_translates_to_the_controller(tmp_path):
+    """A run's ``config.json`` written before the env's arguments were grouped records
+    ``posture_target`` among its env options; it reads as the controller's option."""
+    import shutil
+
+    for name in ("model.zip", "config.json"):
+        shutil.copy(SHIPPED_POLICY.parent / name, tmp_path / name)
+    config = json.loads((tmp_path / "config.json").read_text())
+    config["env_options"]["posture_target"] = "tool"  # the earlier form
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    assert translate_legacy_options(config["env_options"]) == {
+        **{k: v for k, v in config["env_options"].items() if k != "posture_target"},
+        "controller": {"posture_target": "tool"}}
+    actor = PolicyActor(tmp_path / "model.zip")
     assert actor.env_options["controller"] == {"posture_target": "tool"}
-    env = actor.make_env(scene=SMALL)
+    env = actor.make_env(scene=SMALL_MAPPING)
     try:
         assert env.unwrapped.ctrl_cfg.posture_target == "tool"
-        # It acts on SMS3DPickTrain-v1's Jaco: every mushroom free.
-        assert env.unwrapped.robot_cfg.name == "jaco" and env.unwrapped.scene_source.config.free_radius is None
     finally:
         env.close()
 

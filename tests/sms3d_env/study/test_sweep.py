@@ -350,16 +350,16 @@ def test_sweep_compare_refuses_a_sweep_without_the_default_physics(tmp_path, cap
 
 
 def test_sweep_compare_names_the_shipped_pickers_as_the_documentation_does(tmp_path, capsys, monkeypatch):
-    # The descend-trigger figure's legend said "residual" where the text says "learned descend trigger".
+    # A figure's legend once said "residual" where the text named the picker.
     import sms3d_env.study.figures as figures
 
     legends = []
     monkeypatch.setattr(figures, "save_figure",
                         lambda fig, path: legends.append([t.get_text() for t in fig.axes[0].get_legend().get_texts()]))
-    folders = [_sweep_folder(tmp_path / name, picker=name) for name in ("scripted", "residual", "policy")]
+    folders = [_sweep_folder(tmp_path / name, picker=name) for name in ("scripted", "policy")]
     assert main(["sweep-compare", *map(str, folders), "--out", str(tmp_path / "cmp.png")]) == 0
     table = capsys.readouterr().out
-    names = ("scripted picker", "learned descend trigger", "shipped policy")
+    names = ("scripted picker", "shipped policy")
     assert [label.split(" (n = ")[0] for label in legends[0]] == list(names)
     assert all(f"| {name} | 10° |" in table for name in names), table
 

@@ -1,5 +1,5 @@
-"""The imitation recipe's options: a pose error drawn per episode, and the privileged teacher that
-labels every state from the true pose while the clone sees only the estimate."""
+"""The imitation recipe's options: a pose error drawn per episode, the scripted picker labelling
+every state from the estimate the clone sees."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import sms3d_env  # noqa: F401  (registers the env ids)
-from sms3d_env.pickers.privileged import PrivilegedTeacher
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.pose_sources import UniformNoisyPose
 from sms3d_env.training.demonstrations import labelled_steps, minari_root, with_true_target
@@ -26,12 +25,12 @@ def test_with_true_target_replaces_only_the_estimate():
     env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
     try:
         obs, info = env.reset(seed=3)
-        teacher = with_true_target(env, obs, info["target"])
+        truth = with_true_target(env, obs, info["target"])
         inst = env.unwrapped.scene.instances[info["target"]]
-        np.testing.assert_allclose(teacher["target_pose"][:3], inst.cap_top)
-        np.testing.assert_allclose(teacher["target_pose"][3:], np.asarray(inst.rotation)[:, 2])
-        assert _angle_deg(obs["target_pose"][3:], teacher["target_pose"][3:]) == pytest.approx(30.0, abs=1e-6)
-        assert all(np.array_equal(obs[k], teacher[k]) for k in obs if k != "target_pose")
+        np.testing.assert_allclose(truth["target_pose"][:3], inst.cap_top)
+        np.testing.assert_allclose(truth["target_pose"][3:], np.asarray(inst.rotation)[:, 2])
+        assert _angle_deg(obs["target_pose"][3:], truth["target_pose"][3:]) == pytest.approx(30.0, abs=1e-6)
+        assert all(np.array_equal(obs[k], truth[k]) for k in obs if k != "target_pose")
     finally:
         env.close()
 
@@ -47,11 +46,10 @@ def test_the_pose_error_range_draws_a_uniform_noisy_source():
     assert "pose_source" not in train_env_kwargs(8)
 
 
-@pytest.mark.parametrize("teacher", ["estimate", "truth"])
-def test_the_clone_sees_the_estimate_and_the_approach_is_labelled_from_it(teacher, tmp_path):
-    """The learner (here: standing still) acts, the teacher labels; both teachers approach the
+def test_the_clone_sees_the_estimate_and_the_approach_is_labelled_from_it(tmp_path):
+    """The learner (here: standing still) acts, the scripted picker labels: it approaches the
     *estimated* stand-off point (a switch the clone can see), and the clone sees the estimate."""
-    cfg = BCConfig(episodes=1, num_mushrooms=(8,), pose_error_deg=30.0, teacher=teacher, out="unused")
+    cfg = BCConfig(episodes=1, num_mushrooms=(8,), pose_error_deg=30.0, out="unused")
     with minari_root(tmp_path):
         recorded = _record(cfg, [("bc/learner-v0", gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0)))],
                            range(3, 4), actor=lambda obs: np.zeros(7, np.float32), beta=0.0, progress=False)
@@ -61,34 +59,6 @@ def test_the_clone_sees_the_estimate_and_the_approach_is_labelled_from_it(teache
         obs, _ = env.reset(seed=3)
         np.testing.assert_allclose(demos["target_pose"][0], obs["target_pose"])
         np.testing.assert_allclose(demos["actions"][0], ScriptedPicker.for_env(env)(obs), atol=1e-6)
-    finally:
-        env.close()
-
-
-@pytest.mark.parametrize("phase", ["descend", "twist"])
-def test_the_privileged_teacher_descends_and_twists_along_the_true_axis(phase):
-    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
-    try:
-        obs, info = env.reset(seed=3)
-        truth = with_true_target(env, obs, info["target"])
-        teacher = PrivilegedTeacher(env)
-        teacher.picker.phase = phase
-        label = teacher(obs, truth)
-        assert teacher.phase == phase  # the phase machine ran on the observation
-        on_truth, on_estimate = ScriptedPicker.for_env(env), ScriptedPicker.for_env(env)
-        on_truth.phase = on_estimate.phase = phase
-        np.testing.assert_allclose(label, on_truth(truth), atol=1e-6)
-        assert not np.allclose(label[:6], on_estimate(obs)[:6], atol=1e-3)
-        assert label[6] == ScriptedPicker.hold_command
-    finally:
-        env.close()
-
-
-def test_the_privileged_teacher_refuses_the_hand():
-    env = gym.make("SMS3DPick-v0", tool="hand")
-    try:
-        with pytest.raises(ValueError, match="suction"):
-            PrivilegedTeacher(env)
     finally:
         env.close()
 
@@ -103,9 +73,22 @@ def test_bad_pose_error_ranges_are_refused_by_name(low, high):
             BCConfig(pose_error_range_deg=(low, high))
 
 
-def test_a_fixed_error_and_a_range_exclude_each_other_and_teachers_are_named():
+def test_a_fixed_error_and_a_range_exclude_each_other():
     with pytest.raises(ValueError, match="pose_error_range_deg"):
         BCConfig(pose_error_deg=10.0, pose_error_range_deg=(0.0, 30.0))
-    with pytest.raises(ValueError, match="teacher"):
-        BCConfig(teacher="oracle")
+
+
+def test_the_removed_privileged_teacher_is_refused_by_name_and_older_runs_still_read(tmp_path):
+    """``teacher: truth`` (the privileged teacher, removed) is refused saying why; ``teacher:
+    estimate``, which older bc runs record, reads as the scripted picker's recipe it was."""
+    from sms3d_env.training.recipes import read_recipe
+    from sms3d_env.training.zoo import RecipeError
+
+    old = tmp_path / "old.yml"
+    old.write_text("recipe: bc\nteacher: estimate\nepisodes: 10\n")
+    assert read_recipe(old).config == BCConfig(episodes=10)
+    truth = tmp_path / "truth.yml"
+    truth.write_text("recipe: bc\nteacher: truth\n")
+    with pytest.raises(RecipeError, match="teacher: the privileged teacher .* removed on 2026-12-07: its clone picked 24 %"):
+        read_recipe(truth)
 

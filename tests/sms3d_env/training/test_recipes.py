@@ -32,30 +32,28 @@ def test_the_pick_policy_recipe_is_the_shipped_policys_config():
     assert from_saved == BCConfig(**{**asdict(recipe.config), "out": saved["out"]})
     assert saved["episodes"] == recipe.config.episodes == 600
 
-def test_the_descend_trigger_recipe_is_the_shipped_triggers_config():
-    assert read_recipe("descend_trigger").config == read_recipe(WEIGHTS / "descend_trigger" / "config.json").config
-
-
 def test_every_shipped_recipe_reads():
     names = sorted(p.stem for p in RECIPES_DIR.glob("*.yml"))
-    assert names == ["descend_trigger", "pick_policy", "ppo"]
-    assert {read_recipe(name).kind for name in names} == {"bc", "rl", "trigger-rollouts"}
+    assert names == ["pick_policy", "ppo"]
+    assert {read_recipe(name).kind for name in names} == {"bc", "rl"}
 
 
 def test_a_config_mapping_recipe_starts_from_its_kinds_defaults(tmp_path):
-    path = tmp_path / "residual.yml"
-    path.write_text("recipe: residual\npose_error_range_deg: [0, 30]\npose_source: noisy\nnet_arch: [64, 64]\n")
+    path = tmp_path / "rl.yml"
+    path.write_text("recipe: rl\npose_error_range_deg: [0, 30]\npose_source: noisy\nnet_arch: [64, 64]\n")
     recipe = read_recipe(path)
-    assert recipe.kind == "residual" and recipe.source == str(path)
-    assert recipe.config == TrainConfig(**{**asdict(default_recipe("residual").config),
+    assert recipe.kind == "rl" and recipe.source == str(path)
+    assert recipe.config == TrainConfig(**{**asdict(default_recipe("rl").config),
                                           "pose_error_range_deg": (0.0, 30.0), "pose_source": "noisy",
                                           "net_arch": (64, 64)})
 
 
 @pytest.mark.parametrize("text, named", [
-    ("recipe: imitation\n", "recipe: must be one of rl, residual, bc, trigger-rollouts"),
+    ("recipe: imitation\n", "recipe: must be one of rl, bc"),
     ("recipe: rl\nlr: 0.1\n", "no field lr in an rl recipe"),
-    ("recipe: rl\nresidual_scale: 0.5\n", "residual_scale: must be > 0 for a residual recipe and 0 for an rl one"),
+    ("recipe: residual\n", "recipe: residual: residual PPO on top of the scripted picker was removed on 2026-12-07"),
+    ("recipe: trigger-rollouts\n", "recipe: trigger-rollouts: the learned descend trigger (sms3d train-trigger"),
+    ("recipe: rl\nresidual_scale: 0.5\n", "residual_scale: residual PPO on top of the scripted picker was removed"),
     ("recipe: bc\nepochs: -1\n", "BCConfig.epochs must be an integer >= 1"),
     ("recipe: rl\nuse_sde: true\n", "use_sde: removed on 2026-12-06"),
     ("- a list\n", "not a mapping of settings"),

@@ -7,7 +7,6 @@ from __future__ import annotations
 import csv
 import json
 import os
-import re
 import subprocess
 import sys
 import time
@@ -18,7 +17,6 @@ import pytest
 from generator.run_folder import LOCK_FILE, RunFolderError, lock_run_folder
 from sms3d_env.training import TrainConfig, load_model, main, train_policy
 from sms3d_env.training.actor import checkpoint_steps
-from sms3d_env.training.trigger_rollouts import TriggerConfig, train_trigger
 
 TINY = dict(algo="ppo", total_steps=64, n_steps=64, batch_size=64, num_mushrooms=8, max_episode_steps=40,
             eval_freq=0, checkpoint_freq=0, verbose=0, net_arch=(32, 32))
@@ -138,44 +136,6 @@ def test_a_sac_run_resumes_with_its_replay_buffer_and_observation_statistics(tmp
     # The statistics went on from the checkpoint's: the resumed run's reset and 100 steps more.
     count = ObservationStats.load(out / "obs_rms.npz").obs["tool_pose"].count
     assert count == pytest.approx(at_100.obs["tool_pose"].count + 101)
-
-
-SMALL = dict(num_mushrooms=8, pose_error_range_deg=(30.0, 30.0), candidates=4, epochs=2)
-
-
-def test_a_trigger_run_grown_by_more_episodes_labels_the_missing_ones_and_fits_on_all(tmp_path, capsys):
-    from generator.files import read_npz_made_with
-
-    cfg = TriggerConfig(out=str(tmp_path), episodes=2, seed=14, **SMALL)
-    train_trigger(cfg, progress=False)
-    first_chunk = tmp_path / "labels" / "episodes_14-15.npz"
-    stamp = first_chunk.stat().st_mtime_ns
-    capsys.readouterr()
-    grown = TriggerConfig(**{**cfg.__dict__, "episodes": 3})
-    summary = train_trigger(grown, progress=False)
-    assert f"resuming {tmp_path}: 2 of 3 episodes labelled" in capsys.readouterr().out
-    assert first_chunk.stat().st_mtime_ns == stamp
-    chunks = sorted((tmp_path / "labels").glob("*.npz"))
-    assert [p.name for p in chunks] == ["episodes_14-15.npz", "episodes_16-16.npz"]
-    episodes = np.concatenate([read_npz_made_with(p, grown.label_settings(int(a), int(b) + 1))["episode"]
-                               for p in chunks for a, b in [re.findall(r"\d+", p.name)]])
-    assert summary["episodes"] == 3 and set(episodes) <= {14, 15, 16}
-    assert summary["labelled_states"] == len(episodes) and 16 in episodes
-    assert json.loads((tmp_path / "summary.json").read_text()) == summary
-
-    model = (tmp_path / "model.zip").read_bytes()
-    assert train_trigger(grown, progress=False) == summary and "is complete" in capsys.readouterr().out
-    with pytest.raises(RunFolderError, match=r"margin \(0.15 → 0.3\)"):
-        train_trigger(TriggerConfig(**{**grown.__dict__, "margin": 0.3}), progress=False)
-    with pytest.raises(RunFolderError, match=r"episodes \(3 → 2: it may only grow\)"):  # would replace it
-        train_trigger(cfg, progress=False)
-    assert (tmp_path / "model.zip").read_bytes() == model
-
-
-@pytest.mark.parametrize("out", ["", " "])
-def test_train_trigger_refuses_an_empty_out(out, capsys):
-    assert main(["train-trigger", "--out", out, "--episodes", "1"]) == 2
-    assert "--out must name a folder" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("best_at", [100, 200])

@@ -122,8 +122,8 @@ def test_config_roundtrip_and_frozen():
 
 
 def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path):
-    """What a residual fine-tuning run depends on reaches PPO and, through ``config.json``, every
-    later evaluation of the policy."""
+    """What a KL-limited run depends on reaches PPO and, through ``config.json``, every later
+    evaluation of the policy."""
     from stable_baselines3 import PPO
 
     from sms3d_env.training.actor import PolicyActor
@@ -139,33 +139,36 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
     assert "controller" not in TrainConfig().env_kwargs()
 
 
-def test_a_residual_is_trained_and_rebuilt_on_the_scripted_picker(tmp_path):
-    """A residual (``residual_scale`` > 0) reaches the training env's wrapper and, through
-    ``config.json``, the env every later evaluation builds for the policy; a config that names
-    a removed residual mode is refused by name."""
+def test_a_run_of_a_removed_experiment_is_refused_saying_why(tmp_path):
+    """A residual run's or the descend trigger's ``config.json`` (``residual_scale`` > 0: their
+    actions corrected the scripted picker's in a removed wrapper) is refused by ``PolicyActor``,
+    as ``init_model`` and as a ``TrainConfig``, naming the removal; an older rl run's record of
+    removed fields at their defaults still reads."""
     from sms3d_env.training.actor import PolicyActor
 
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", residual_scale=0.5, normalize=True, total_steps=128,
-                      n_steps=128, batch_size=64, out=str(tmp_path), **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", total_steps=128, n_steps=128, batch_size=64,
+                      out=str(tmp_path / "run"), **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
     train_policy(cfg)
-    assert json.loads((tmp_path / "config.json").read_text())["recipe"] == "residual"
-    actor = PolicyActor(tmp_path / "model.zip")
-    env = actor.make_env()
-    try:
-        assert env.scale == 0.5 and not env.descend_trigger
-        obs, _ = env.reset(seed=0)
-        action = actor(obs)
-        assert action.shape == env.action_space.shape == (7,)
-        env.step(action)
-    finally:
-        env.close()
-    saved = json.loads((tmp_path / "config.json").read_text())
-    (tmp_path / "config.json").write_text(json.dumps({**saved, "residual_until_held": True}))
-    with pytest.raises(PolicyFileError, match="residual_until_held.*removed on 2026-12-06"):
-        PolicyActor(tmp_path / "model.zip")
+    config = tmp_path / "run" / "config.json"
+    saved = json.loads(config.read_text())
+    assert "residual_scale" not in saved and saved["recipe"] == "rl"
+    older = {**saved, "residual_scale": 0.0, "residual_until_held": False, "use_sde": False}
+    assert TrainConfig.from_dict(older) == cfg  # an older run's record, at the defaults
     with pytest.raises(ValueError, match="TrainConfig.use_sde=True: removed on 2026-12-06"):
         TrainConfig.from_dict({**saved, "use_sde": True})
-    assert TrainConfig.from_dict({**saved, "use_sde": False}) == cfg  # an older run's record, at the default
+    with pytest.raises(ValueError, match="residual_scale=0.5: residual PPO .* removed on 2026-12-07"):
+        TrainConfig.from_dict({**saved, "residual_scale": 0.5})
+    config.write_text(json.dumps({**saved, "recipe": "residual", "residual_scale": 0.5}))
+    with pytest.raises(PolicyFileError, match="is a residual policy: residual PPO .* never beat the scripted picker"):
+        PolicyActor(tmp_path / "run" / "model.zip")
+    config.write_text(json.dumps({**saved, "recipe": "trigger-rollouts", "residual_scale": 1.0,
+                                  "residual_descend_trigger": True, "residual_trigger_only": True}))
+    with pytest.raises(PolicyFileError, match="the learned descend trigger .* removed on 2026-12-07"):
+        PolicyActor(tmp_path / "run" / "model.zip")
+    continued = TrainConfig(**{**cfg.__dict__, "init_model": str(tmp_path / "run" / "model.zip"),
+                               "out": str(tmp_path / "next")})
+    with pytest.raises(InitModelError, match="is a residual policy: the learned descend trigger"):
+        train_policy(continued)
 
 
 def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
@@ -243,11 +246,9 @@ def _train_policy_command(argv, capsys):
     (["pick_policy", "--hyperparams", "epochs=0"], "--hyperparams: BCConfig.epochs must be an integer >= 1"),
     (["--recipe", "bc", "--demo-episodes", "0"], "--demo-episodes: BCConfig.episodes must be"),
     ([], "name a recipe"),
-    (["no-such-recipe"], "no recipe file no-such-recipe (shipped recipes: descend_trigger, pick_policy, ppo)"),
-    (["descend_trigger"], "a trigger-rollouts recipe; sms3d train-trigger trains it"),
+    (["no-such-recipe"], "no recipe file no-such-recipe (shipped recipes: pick_policy, ppo)"),
     (["ppo", "--use-sde"], "--use-sde: removed on 2026-12-06"),
-    (["--recipe", "residual", "--residual-until-held", "--trigger-log-std", "-1"],
-     "--residual-until-held, --trigger-log-std: removed on 2026-12-06"),
+    (["ppo", "--use-sde", "--critic-warmup-steps", "5"], "--critic-warmup-steps, --use-sde: removed on 2026-12-06"),
 ], ids=lambda v: v if isinstance(v, str) else " ".join(v))
 def test_train_policy_refuses_what_its_recipe_cannot_use_by_name(capsys, argv, flag):
     code, out, _ = _train_policy_command(argv, capsys)
@@ -424,7 +425,6 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
     import gymnasium as gym
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    import generator
     from sms3d_env.training.actor import PolicyActor
     from sms3d_env.training.envs import make_env, vec_env
 
@@ -475,13 +475,4 @@ def test_a_run_cannot_start_from_a_model_of_the_other_observation_layout(ppo_run
     cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, flat_observation=True,
                       init_model=str(out / "model.zip"), out=str(tmp_path), **FAST)
     with pytest.raises(InitModelError, match="dict observations.*flat_observation=False"):
-        train_policy(cfg)
-
-
-def test_a_run_cannot_start_from_the_learned_descend_trigger(tmp_path):
-    from sms3d_env.training.actor import SHIPPED_TRIGGER
-
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v1", residual_scale=0.5, normalize=True, total_steps=128,
-                      init_model=str(SHIPPED_TRIGGER), out=str(tmp_path), **FAST)
-    with pytest.raises(InitModelError, match="is a learned descend trigger"):
         train_policy(cfg)

@@ -303,18 +303,24 @@ def test_the_suggested_record_command_survives_quotes_and_runs_nothing_else(tmp_
     assert load_sb3(folder / "model.zip", ("ppo",)).observation_space.shape == (3,)
 
 
-def test_a_command_contradicting_the_options_a_policy_was_trained_with_is_refused_by_name():
-    """The shipped trigger was trained on the Jaco: a sweep asking for the gantry ran the Jaco and
-    labelled every row gantry. Options the command repeats as trained pass."""
-    from generator import SceneConfig
-    from sms3d_env.training.actor import SHIPPED_TRIGGER
+def test_a_command_contradicting_the_options_a_policy_was_trained_with_is_refused_by_name(tmp_path):
+    """A policy trained on the Jaco that a sweep asked for the gantry ran the Jaco and labelled
+    every row gantry. Options the command repeats as trained pass."""
+    import shutil
+
+    from sms3d_env.training.actor import SHIPPED_POLICY
     from sms3d_env.training.model_files import PolicyFileError
 
-    actor = PolicyActor(SHIPPED_TRIGGER)
-    with pytest.raises(PolicyFileError, match=r"robot='gantry' \(trained with 'jaco'\)"):
-        actor.make_env(robot="gantry")
-    env = actor.make_env(robot="jaco", task_obs=True, scene=SceneConfig().replace(placement__num_mushrooms=5))
-    assert env.unwrapped.robot_cfg.name == "jaco"
+    for name in ("model.zip", "config.json"):
+        shutil.copy(SHIPPED_POLICY.parent / name, tmp_path / name)
+    config = json.loads((tmp_path / "config.json").read_text())
+    config["env_options"]["robot"] = "gantry"  # recorded as trained
+    (tmp_path / "config.json").write_text(json.dumps(config))
+    actor = PolicyActor(tmp_path / "model.zip")
+    with pytest.raises(PolicyFileError, match=r"robot='jaco' \(trained with 'gantry'\)"):
+        actor.make_env(robot="jaco")
+    env = actor.make_env(robot="gantry", task_obs=True, scene={"placement": {"num_mushrooms": 5}})
+    assert env.unwrapped.robot_cfg.name == "gantry"
     env.close()
 
 
