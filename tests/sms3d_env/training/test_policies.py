@@ -85,7 +85,6 @@ def test_eval_policy_names_a_missing_model(capsys, tmp_path):
 
 
 @pytest.mark.parametrize("text, error", [("nonsense", ValueError), ("scripted:x.zip", ValueError),
-                                         ("residual:/no/such/model.zip", FileNotFoundError),
                                          ("policy:/no/such/model.zip", FileNotFoundError)])
 def test_parse_picker_refuses_bad_names(text, error):
     with pytest.raises(error):
@@ -95,10 +94,18 @@ def test_parse_picker_refuses_bad_names(text, error):
 def test_parse_picker_defaults():
     assert parse_picker("scripted") == PickerSpec("scripted", None)
     assert parse_picker("policy") == PickerSpec("policy", None)  # the shipped one
-    assert parse_picker("residual") == PickerSpec("residual", None)  # the shipped descend trigger
-    assert parse_picker("residual").model_path.is_file() and parse_picker("policy").model_path.is_file()
-    assert parse_picker("residual").model_path != parse_picker("policy").model_path
+    assert parse_picker("policy").model_path.is_file()
     assert parse_picker("scripted").model_path is None
+
+
+@pytest.mark.parametrize("text", ["residual", "residual:/no/such/model.zip", "residual:runs/trigger/model.zip"])
+def test_parse_picker_says_the_residual_pickers_were_removed_and_where_the_finding_is(text):
+    """The residual pickers (residual PPO, the learned descend trigger) were removed: asking for
+    one names it, why and where the measurement lives, before looking for any file."""
+    with pytest.raises(ValueError, match=r"picker 'residual.*removed on 2026-12-07: residual PPO never beat the "
+                                         r"scripted picker .*docs/results-training.md") as err:
+        parse_picker(text)
+    assert "CHANGELOG.md" in str(err.value) and "policy[:PATH]" in str(err.value)
 
 
 def test_sweep_runs_a_learned_picker_on_the_same_episodes(bc_run, tmp_path):
