@@ -1,4 +1,4 @@
-"""Speed of SMS3DPick-v2 (or ``--version v1``/``v0``): env steps/s with random actions and the
+"""Speed of SMS3DPick-v2 (or ``--version v1``): env steps/s with random actions and the
 registered 250-step time limit, so the resets it triggers are in the rate (state observations,
 50 mushrooms), reset time, and steps/s with 64 x 64 RGB-D observations; the training id's reset
 with and without a scene pool. Anchor: FetchPickAndPlace-v4, measured by bench_fetch.py in its
@@ -68,7 +68,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=500)
     ap.add_argument("--mushrooms", type=int, default=50)
     ap.add_argument("--resets", type=int, default=20)
-    ap.add_argument("--version", choices=("v2", "v1", "v0"), default="v2")
+    ap.add_argument("--version", choices=("v2", "v1"), default="v2")
     ap.add_argument("--substeps", type=int, default=ControllerConfig.substeps,
                     help="physics steps per 40 ms control step (ControllerConfig.substeps; default 10 x 4 ms)")
     ap.add_argument("--fetch-python", default=None,

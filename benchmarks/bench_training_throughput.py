@@ -1,7 +1,7 @@
 """PPO training throughput (env steps per wall second) of the from-scratch recipe for each way
 of stepping the envs (``--vec-env``) and each observation layout (``--flat-observation``).
 
-Each row trains the from-scratch recipe's PPO (``SMS3DPickTrain-v0``, observation normalisation,
+Each row trains the from-scratch recipe's PPO (``SMS3DPickTrain-v2``, observation normalisation,
 pre-grasp starts, a rate falling over the wall clock, 2 envs, rollouts of 1024 steps per env)
 for ``--steps`` env steps with no periodic evaluation or checkpoints, on a small scene pool (``--pool``) that the
 first episodes fill, so that the rate is the steady one of a long run and not bed generation's.
@@ -28,7 +28,7 @@ LAYOUTS = (("subproc", False), ("subproc", True), ("dummy", False), ("dummy", Tr
 
 
 def steps_per_s(vec_env: str, flat: bool, steps: int, pool: int, n_envs: int, out: str) -> float:
-    cfg = TrainConfig(env_id="SMS3DPickTrain-v0", normalize=True, scene_pool=pool, n_envs=n_envs,
+    cfg = TrainConfig(env_id="SMS3DPickTrain-v2", normalize=True, scene_pool=pool, n_envs=n_envs,
                       vec_env=vec_env, flat_observation=flat, num_mushrooms=10, pregrasp_start=0.75,
                       pregrasp_anneal=True, target_kl=0.02, log_std_init=-1.0, total_steps=steps,
                       eval_freq=0, checkpoint_freq=0, seed=0, out=out, verbose=0)

@@ -1,7 +1,7 @@
 """Gymnasium environments for robotic mushroom picking (``SMS3DPick-v2``, ``SMS3DPickTrain-v2``:
-the learnable training options; the superseded ``-v1`` ids, whose picking model's rules rather
-than the mushroom set the outcome, and ``-v0`` ids, with the Jaco whose links partly collide with
-nothing)."""
+the learnable training options; and the superseded ``-v1`` ids, whose picking model's rules rather
+than the mushroom set the outcome). The ``-v0`` ids, with the Jaco whose links partly collide with
+nothing, were removed: ``gym.make`` refuses them naming the latest version."""
 
 # Importing generator first sets the headless rendering default (MUJOCO_GL=egl) before anything
 # imports mujoco.
@@ -31,7 +31,7 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 
-#: The training options of ``SMS3DPick-v0`` (see ``SMS3DPickEnv``): latched suction, the staged
+#: The training options of ``SMS3DPick-v2`` (see ``SMS3DPickEnv``): latched suction, the staged
 #: reward, episodes that end at dead ends, and observations in the estimated target's frame.
 TRAIN_OPTIONS = {"reward_type": "staged", "suction_mode": "latched", "end_on_dead_end": True,
                  "task_obs": True}
@@ -40,15 +40,12 @@ TRAIN_OPTIONS = {"reward_type": "staged", "suction_mode": "latched", "end_on_dea
 #: ``SMS3DPickEnv``'s version history): v1's picking model and the tallest reachable target.
 V1_OPTIONS = {"robot": "gantry", "physics": V1_PHYSICS, "target": "tallest"}
 
-for _id, _entry, _kw in (("SMS3DPick-v0", "make_v0_env", {"reward_type": "dense"}),
-                         ("SMS3DPickSparse-v0", "make_v0_env", {"reward_type": "sparse"}),
-                         ("SMS3DPickTrain-v0", "make_v0_env", TRAIN_OPTIONS),
-                         ("SMS3DPick-v1", "SMS3DPickEnv", {"reward_type": "dense", **V1_OPTIONS}),
-                         ("SMS3DPickTrain-v1", "SMS3DPickEnv", {**TRAIN_OPTIONS, **V1_OPTIONS}),
-                         ("SMS3DPick-v2", "SMS3DPickEnv", {}),
-                         ("SMS3DPickTrain-v2", "SMS3DPickEnv", TRAIN_OPTIONS)):
+for _id, _kw in (("SMS3DPick-v1", {"reward_type": "dense", **V1_OPTIONS}),
+                 ("SMS3DPickTrain-v1", {**TRAIN_OPTIONS, **V1_OPTIONS}),
+                 ("SMS3DPick-v2", {}),
+                 ("SMS3DPickTrain-v2", TRAIN_OPTIONS)):
     if _id not in registry:
-        register(id=_id, entry_point=f"sms3d_env.pick_env:{_entry}", max_episode_steps=250, kwargs=_kw)
+        register(id=_id, entry_point="sms3d_env.pick_env:SMS3DPickEnv", max_episode_steps=250, kwargs=_kw)
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

@@ -49,7 +49,7 @@ class ControllerConfig:
         substeps: physics steps per control period (the physics step is ``control_dt /
             substeps``): 10 x 4 ms. With the seal read over its response time, 400 scripted
             picks per robot and error (0-30 deg) end the same at 1, 2 and 4 ms to within one
-            episode; v0 steps 20 x 2 ms (``V0_CONTROLLER``).
+            episode (the removed v0 stepped 20 x 2 ms).
         posture_target: the IK's null-space posture (:mod:`sms3d_env.posture`): ``"estimate"``
             (default) a pre-grasp configuration solved once per episode for the *estimated*
             axis; ``"tool"`` solved again whenever the tool axis turns more than 5 deg away from

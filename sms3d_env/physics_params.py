@@ -63,13 +63,13 @@ class PickPhysicsParams:
             seal's shear, bending and twist capacities (statics of a lip pressed on a surface;
             Dex-Net 3.0's suction contact model, Mahler et al. 2018, bounds friction and torsion
             by the normal force, vacuum included). False: the capacities of the holding force
-            alone (v0).
+            alone (the removed v0).
         lip_seal: judge the seal on the cup's whole lip (Dex-Net 3.0's perimeter model): it
             forms only when every one of ``lip_points`` points of the lip (radius
             ``cup_radius``) lies over the target's cap, the spread of their distances to it
             along the cup axis within ``lip_compliance``; a lip point over air, soil, a
             neighbour or past the cap's edge leaks. It replaces the one-contact rule
-            (``seal_angle_deg``, ``seal_region``). False: the one-contact rule (v0, v1).
+            (``seal_angle_deg``, ``seal_region``). False: the one-contact rule (v1).
         lip_compliance: the rim-height mismatch the cup's lip or bellows absorbs (m), the stroke
             ``S`` of a bellows cup. ASSUMPTION: bellows suction cups "compensate for variations
             in height" (Piab, SMC ZPT catalogue) but no stored datasheet gives the stroke of a
@@ -85,7 +85,7 @@ class PickPhysicsParams:
             slip-shear of the surface hyphae, then browning): when the friction work done on it
             by contacts slipping over its surface (a cup sliding before it seals, a lifted cap
             scraping a neighbour) reaches ``slip_bruise_work``. False: bruising by pressure
-            alone (``bruise_force``; v0, v1).
+            alone (``bruise_force``; v1).
         slip_bruise_work: friction work (J) slipping on one cap that bruises it. ASSUMPTION: no
             numeric slip-shear threshold is published (Burton's bruisometer measures it, values
             not stored); 5 mJ is 1 N of friction dragged 5 mm across the cap.
@@ -93,12 +93,12 @@ class PickPhysicsParams:
             cap pushes, drags or scrapes its neighbours. The bed's collision hulls must not
             interpenetrate at rest (more than 1 mm): generated beds need
             ``placement.overlap_iou = 0``; a bed that does is refused at reset. False: mushrooms
-            touch only the robot and the soil (v0, v1).
+            touch only the robot and the soil (v1).
         compliant_root: the root bends and twists before it lets go (:mod:`sms3d_env.roots`): a
             ball constraint at the stem base, rotational springs that reach ``bend_moment`` after
             ``bend_angle_deg`` of bending and ``twist_torque`` after ``twist_angle_deg`` of twist,
             and the same failure rule (``physics.root_utilisation``). False: a stiff weld that
-            lets go at those loads after a fraction of a degree (v0, v1).
+            lets go at those loads after a fraction of a degree (v1).
         bend_angle_deg: bending of the stem at its base (deg) when the bending moment reaches
             ``bend_moment`` (with ``compliant_root``). ASSUMPTION (no published bend angle at
             detachment): 15 degrees, the "bend into free space" of the Silsoe picker before its
@@ -112,7 +112,7 @@ class PickPhysicsParams:
         clean_pick: success needs a clean pick, as a grower judges it: besides the target picked
             unbruised, no neighbour moved further than ``disturb_tolerance`` or knocked off its
             roots (``info["neighbours_disturbed"]``; ``info["target_picked"]`` says whether the
-            target itself was picked). False: neighbours do not count (v0, v1).
+            target itself was picked). False: neighbours do not count (v1).
     """
 
     pull_force: float = 8.0

@@ -29,13 +29,13 @@ from generator.gl import open_renderer
 from sms3d_env.cameras import ImageObservation, RenderCamera
 from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.env_args import RENDER_MODES, SUCTION_MODES, check_env_args, pose_error_of
-from sms3d_env.physics_params import V1_PHYSICS, PickPhysicsParams, physics_for
+from sms3d_env.physics_params import PickPhysicsParams, physics_for
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
 from sms3d_env.pose_sources import PoseSource, make_pose_source
 from sms3d_env.posture import IKPosture
 from sms3d_env.records import record_of
 from sms3d_env.rewards import RewardConfig, RewardState, compute_reward, reward_terms
-from sms3d_env.robot import RobotConfig, RobotSpec
+from sms3d_env.robot import RobotSpec
 from sms3d_env.robots import make_robot
 from sms3d_env.scene_source import SceneSource, scene_source_config
 from sms3d_env.start_states import PregraspStart, check_share
@@ -44,19 +44,9 @@ from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
 from sms3d_env.viewer import PassiveViewer
 from sms3d_env.world import PICK_CAMERA, PICK_CAMERA_DISTANCE, World, build_world
 
-__all__ = ["FAILURE_CAUSES", "SUCTION_MODES", "V0_FREE_RADIUS", "SMS3DPickEnv", "make_v0_env"]
+__all__ = ["FAILURE_CAUSES", "SUCTION_MODES", "SMS3DPickEnv"]
 
 _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
-#: ``SMS3DPick-v0``'s collision set: only the mushrooms within this distance (m) of the target
-#: can move (``SceneSourceConfig.free_radius``).
-V0_FREE_RADIUS = 0.10
-#: ``SMS3DPick-v0``'s seal rule: each physics step's load against the holding force's capacities.
-V0_SEAL = {"seal_response_time": 0.0, "seal_preload": False}
-#: ``SMS3DPick-v0``'s control step: 20 physics steps of 2 ms.
-V0_CONTROLLER = {"substeps": 20}
-#: The v0 ids' Jaco, mounted beside the bed, five of its links colliding with nothing: the env
-#: builds it only when given this very object (:func:`make_v0_env`).
-V0_ROBOT = RobotConfig()
 # State observation entries and their sizes, in the order of the flat vector they are cut from.
 _OBS_SIZES = {"joint_pos": 6, "joint_vel": 6, "tool_pose": 7, "suction": 3, "target_pose": 6,
               "target_rel": 3}
@@ -189,9 +179,10 @@ class SMS3DPickEnv(gym.Env):
       ``"harvest_ready"`` target) are off in v1.
     - v0: the Jaco beside the bed below the soil line; its base, shoulder, upper arm, forearm and
       first wrist link collide with nothing, and only the mushrooms within 10 cm of the target
-      collide with anything (``free_radius=0.10``, :func:`make_v0_env`); 20 physics steps of
-      2 ms per control step, and the seal let go on one step's load. Superseded by v1; its
-      measurements stay in the results history.
+      collide with anything (``free_radius=0.10``); 20 physics steps of 2 ms per control step,
+      and the seal let go on one step's load. Superseded by v1 and removed (its ids are no longer
+      registered; ``gym.make`` names the latest version); its measurements stay in the results
+      history and the changelog.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 25}
@@ -215,9 +206,7 @@ class SMS3DPickEnv(gym.Env):
         image_obs: bool | ImageObservation | Mapping[str, Any] = False,
         render_camera: str | RenderCamera | Mapping[str, Any] | None = None,
     ) -> None:
-        # None is the default robot, never v0's Jaco (five links that collide with nothing): only the
-        # v0 ids' entry point passes that one (V0_ROBOT), and make_robot refuses it otherwise.
-        self.robot_cfg = V0_ROBOT if robot is V0_ROBOT else make_robot("gantry" if robot is None else robot)
+        self.robot_cfg = make_robot("gantry" if robot is None else robot)
         check_env_args(render_mode=render_mode, tool=tool or self.robot_cfg.tool, suction_mode=suction_mode,
                        pose_source=pose_source, pose_error_deg=pose_error_deg, end_on_dead_end=end_on_dead_end,
                        task_obs=task_obs)
@@ -494,20 +483,3 @@ class SMS3DPickEnv(gym.Env):
         state["_viewer"] = None  # nor does a window
         return state
 
-
-def make_v0_env(scene: Any = None, **kwargs: Any) -> SMS3DPickEnv:
-    """The env of the ``-v0`` ids (their entry point): ``SMS3DPickEnv(**kwargs)`` (v0's Jaco,
-    ``V0_ROBOT``, unless ``robot`` says otherwise) with only the mushrooms within ``V0_FREE_RADIUS`` of the
-    target free, whatever bed ``scene`` gives (a ``SceneSourceConfig`` with a ``free_radius`` of
-    its own keeps it; a ``scene`` passed to ``gym.make`` replaces the registered one whole, so the
-    v0 radius cannot be a registered argument), and, unless ``physics`` or ``controller`` is
-    given, v0's seal rule (``V0_SEAL``) and physics step (``V0_CONTROLLER``)."""
-    source = scene_source_config(scene)
-    if source.free_radius is None:
-        source = replace(source, free_radius=V0_FREE_RADIUS)
-    if kwargs.get("controller") is None:
-        kwargs["controller"] = ControllerConfig(**V0_CONTROLLER)
-    if kwargs.get("physics") is None:  # v1's picking model for its robot, with v0's seal rule
-        kwargs["physics"] = {**V1_PHYSICS, **V0_SEAL}
-    kwargs.setdefault("target", "tallest")
-    return SMS3DPickEnv(scene=source, **{"robot": V0_ROBOT, **kwargs})

@@ -40,20 +40,14 @@ FINGER_BODIES: tuple[tuple[str, str], ...] = tuple(
 
 # Collision bitmasks shared by robot, soil and mushrooms (see physics.py for the mushroom side).
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 4
-# Tool geoms also carry bit 8, the only bit the soil accepts, and so do the links in
-# ``COLLIDING_LINKS`` (wrist 2 and the hand): they collide with the soil and with mushrooms, never
-# with each other or the tool (no robot geom accepts bits 2 or 8). With ``all_links_collide=False``
-# (SMS3DPick-v0) the base, shoulder, upper arm, forearm (b_3) and wrist 1 (b_4) collide with
-# nothing: from the low mount that the Jaco's joint limits need for tool-down reach, the forearm
-# passes through the soil at the bed's near edge in every episode, and wrist 1 (a 3.5 cm ring
-# 7-12 cm beside the tool axis) sweeps through neighbouring caps during about a quarter of the
-# oracle picks (oracle success 97.5 -> 72.5 % with it colliding, mostly bruised caps).
+# Tool geoms also carry bit 8, the only bit the soil accepts, and so do the Jaco's links: every
+# link collides with the soil and with mushrooms, never with another link or the tool (no robot
+# geom accepts bits 2 or 8). (SMS3DPick-v0's Jaco, removed, had five links colliding with nothing.)
 TOOL_CONTYPE = ROBOT_CONTYPE | 8
-LINK_CONTYPE, LINK_CONAFFINITY = 0, 0
-COLLIDING_LINKS = ("b_5", "b_6")
-# In-limits home posture (rad): the cup 20 cm above the patch centre, pointing down (solved once
-# by least squares for the default mount).
-HOME_Q = np.array([-0.205, 1.4551, 1.4696, -2.8701, -0.0164, -0.0577])
+# Home posture (rad) of the Jaco hanging above the bed with the right-angle adapter: the cup 20 cm
+# above the patch centre, pointing down (solved by least squares from random starts, the best
+# conditioned).
+HOME_Q = np.array([0.364, 1.227, 0.811, -0.691, -2.037, 3.415])
 
 
 class RobotSpec(Protocol):
@@ -95,9 +89,10 @@ class RobotConfig:
 
     Attributes:
         mount_pos: arm base position in the world (m). The bed patch is centred on the origin with
-            the soil near z = 0; the base stands beside it so that most of the patch is reachable
-            with the tool pointing down (``targets.select_target`` flags each target's reach in
-            ``info["reachable"]``; the study counts only reachable targets).
+            the soil near z = 0; the base hangs 0.7 m above the soil, 0.25 m from the patch centre,
+            so that most of the patch is reachable with the tool pointing down
+            (``targets.select_target`` flags each target's reach in ``info["reachable"]``; the
+            study counts only reachable targets). Why hanging: :data:`sms3d_env.robots.HANGING_JACO`.
         mount_yaw_deg: base rotation about world z.
         mount_roll_deg: base rotation about its own x after the yaw (180: hanging upside down).
         tool: ``"suction"`` (default) or ``"hand"`` (the Jaco 3-finger hand on finger position
@@ -105,7 +100,7 @@ class RobotConfig:
         cup_radius: suction cup radius (m), 10 mm as in docs/physics.md (20 mm cup).
         tube_length: length of the tube between the wrist flange and the cup (m). ASSUMPTION.
         tool_tilt_deg: the angle between the tool's approach axis and the wrist's last joint
-            axis (deg): 0 an inline tool; 90 a right-angle adapter, which keeps the Jaco's wrist
+            axis (deg): 0 an inline tool; 90 (default) a right-angle adapter, which keeps the Jaco's wrist
             bent (away from its singularity, wrist joints 4 and 6 aligned) while the cup points
             down. ASSUMPTION: angled suction adapters are common on arm-mounted pickers; no
             published mushroom harvester with a Jaco sets the angle.
@@ -120,8 +115,8 @@ class RobotConfig:
             finger in ~6 s and hit a cap like a 1.4 kg mass: now ~2.4 rad/s, 0.3 kg at the tip.
         approach: how the scripted pickers (``ScriptedPicker.for_env``) bring the tool to the
             stand-off point above the target: ``"cartesian"`` straight towards it, the cup
-            turned onto the axis on the way; ``"joint"`` first along a straight joint-space
-            path to the arm configuration there (:mod:`sms3d_env.pickers.joint_path`), for an
+            turned onto the axis on the way; ``"joint"`` (default) first along a straight
+            joint-space path to the arm configuration there (:mod:`sms3d_env.pickers.joint_path`), for an
             arm whose straight Cartesian approach crosses a singularity.
     """
 
@@ -129,13 +124,13 @@ class RobotConfig:
     prefix: ClassVar[str] = PREFIX
     joints: ClassVar[tuple[str, ...]] = ARM_JOINTS
 
-    mount_pos: tuple[float, float, float] = (-0.40, 0.0, -0.25)
+    mount_pos: tuple[float, float, float] = (-0.25, 0.0, 0.70)
     mount_yaw_deg: float = 0.0
-    mount_roll_deg: float = 0.0
+    mount_roll_deg: float = 180.0
     tool: Tool = "suction"
     cup_radius: float = 0.010
     tube_length: float = 0.09
-    tool_tilt_deg: float = 0.0
+    tool_tilt_deg: float = 90.0
     kp_large: float = 1500.0
     kp_small: float = 500.0
     force_large: float = 40.0
@@ -145,8 +140,7 @@ class RobotConfig:
     finger_damping: float = 0.1
     finger_armature: float = 0.001
     home_q: tuple[float, ...] = field(default=tuple(HOME_Q))
-    all_links_collide: bool = False
-    approach: str = "cartesian"
+    approach: str = "joint"
 
     def __post_init__(self) -> None:
         check_tool_fields(self)
@@ -238,11 +232,8 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
     spec = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_arm.xml"))
     for name in ("b_1", "b_2", "b_3", "b_4", "b_5", "b_6"):
         spec.body(name).gravcomp = 1.0
-    colliding = {b.name for b in spec.bodies} if cfg.all_links_collide else set(COLLIDING_LINKS)
     for g in spec.geoms:
-        collides = g.parent.name in colliding
-        g.contype = TOOL_CONTYPE if collides else LINK_CONTYPE
-        g.conaffinity = ROBOT_CONAFFINITY if collides else LINK_CONAFFINITY
+        g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
     for i, jname in enumerate(ARM_JOINTS):
         large = i < 3
         act = spec.add_actuator(name=f"act_{jname}", target=jname,

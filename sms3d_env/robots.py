@@ -1,5 +1,5 @@
-"""The robots of ``SMS3DPick-v1`` by name: ``"gantry"`` (the Cartesian harvester) and ``"jaco"``
-(the Kinova Jaco with every link colliding)."""
+"""The robots by name: ``"gantry"`` (the Cartesian harvester, the default) and ``"jaco"`` (the
+Kinova Jaco hanging above the bed, every link colliding)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from sms3d_env.gantry import GantryConfig
 from sms3d_env.robot import RobotConfig, RobotSpec
 from sms3d_env.robot_names import ROBOTS
 
-#: The Jaco of ``SMS3DPick-v1``: hanging upside down 0.7 m above the soil, 0.25 m from the patch
-#: centre, with a right-angle suction adapter (``tool_tilt_deg=90``). ASSUMPTIONS chosen by
-#: measurement: mounted beside the bed at or below the soil, as in v0, its upper arm and forearm
+#: The Jaco (``RobotConfig()``'s defaults): hanging upside down 0.7 m above the soil, 0.25 m from
+#: the patch centre, with a right-angle suction adapter (``tool_tilt_deg=90``). ASSUMPTIONS chosen
+#: by measurement: mounted beside the bed at or below the soil, as in v0, its upper arm and forearm
 #: pass through the soil and the caps once they collide; hanging with an inline cup, pointing the
 #: cup down straightens the wrist into its singularity, where the differential IK stopped short of
 #: 20 % of the approaches at a 30° orientation error (``not_reached``); the right-angle adapter
@@ -19,9 +19,7 @@ from sms3d_env.robot_names import ROBOTS
 #: Approach: along a straight joint-space path (``approach="joint"``); the straight Cartesian
 #: approach stopped short of 10 / 10 / 8 / 20 of 400 targets at 0 / 10 / 20 / 30° where the arm
 #: folded under its shoulder or straightened its wrist on the way, the joint-space path of none.
-HANGING_JACO = RobotConfig(mount_pos=(-0.25, 0.0, 0.70), mount_roll_deg=180.0, tool_tilt_deg=90.0,
-                           all_links_collide=True, home_q=(0.364, 1.227, 0.811, -0.691, -2.037, 3.415),
-                           approach="joint")
+HANGING_JACO = RobotConfig()
 
 
 def make_robot(robot: str | RobotSpec) -> RobotSpec:
@@ -30,9 +28,6 @@ def make_robot(robot: str | RobotSpec) -> RobotSpec:
     if not isinstance(robot, str):
         if not isinstance(robot, (RobotConfig, GantryConfig)):
             raise ValueError(f"robot must be one of {ROBOTS} or a RobotConfig / GantryConfig, got {robot!r}")
-        if isinstance(robot, RobotConfig) and not robot.all_links_collide:
-            raise ValueError("robot: a RobotConfig with all_links_collide=False has links that pass through the "
-                             "soil and the mushrooms; set all_links_collide=True (v0's Jaco is robot=None)")
         return robot
     if robot == "gantry":
         return GantryConfig()

@@ -72,8 +72,8 @@ class SceneSourceConfig:
         free_radius: only mushrooms whose stem base lies within this distance (m) of the
             target's keep a free joint and a root weld (can be disturbed or detached); the others
             are static bodies that the robot passes through, which makes the simulation several
-            times faster (``SMS3DPick-v0``: 0.10). None (default, ``SMS3DPick-v1``): every mushroom
-            is free.
+            times faster (the removed ``SMS3DPick-v0`` used 0.10). None (default, v1 and v2): every
+            mushroom is free.
 
     Its mapping form (:func:`~sms3d_env.records.record_of`) has these field names:
     ``{"config": {"placement": {"num_mushrooms": 10}}, "pool": 500}``.

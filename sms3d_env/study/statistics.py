@@ -46,14 +46,15 @@ class RowAxes(NamedTuple):
         return self.robot, self.tool, self.num_mushrooms
 
 
-#: The robot of rows recorded before the robot was an axis: SMS3DPick-v0's Jaco.
-V0_ROBOT = "jaco-v0"
+#: The robot of rows recorded before the robot was an axis (they were made on the Jaco of the
+#: removed SMS3DPick-v0; such rows are read, as results, and no env of theirs is built).
+UNRECORDED_ROBOT = "jaco-v0"
 
 
 def axes(row: dict[str, Any]) -> RowAxes:
     """A row's robot, tool, bed size and cap-top position error (mm); rows of earlier sweeps
-    hold only some of them (``V0_ROBOT``, suction, 25 mushrooms, 0 mm)."""
-    return RowAxes(row.get("robot", V0_ROBOT), row.get("tool", "suction"), int(row.get("num_mushrooms", 25)),
+    hold only some of them (``UNRECORDED_ROBOT``, suction, 25 mushrooms, 0 mm)."""
+    return RowAxes(row.get("robot", UNRECORDED_ROBOT), row.get("tool", "suction"), int(row.get("num_mushrooms", 25)),
                    float(row.get("position_error_mm", 0.0)))
 
 

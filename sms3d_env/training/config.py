@@ -11,9 +11,9 @@ ALGOS = ("ppo", "sac")
 POSE_SOURCES = ("oracle", "noisy")
 REWARD_TYPES = ("dense", "sparse", "staged")
 #: The ids a policy can be trained on: the base ids (whose ``reward_type`` is an option) and the
-#: training ids (the learnable options, the staged reward among them); v0 ids are superseded.
-BASE_ENV_IDS = ("SMS3DPick-v1", "SMS3DPick-v0")
-TRAIN_ENV_IDS = ("SMS3DPickTrain-v1", "SMS3DPickTrain-v0")
+#: training ids (the learnable options, the staged reward among them); v1 ids are superseded.
+BASE_ENV_IDS = ("SMS3DPick-v2", "SMS3DPick-v1")
+TRAIN_ENV_IDS = ("SMS3DPickTrain-v2", "SMS3DPickTrain-v1")
 ENV_IDS = BASE_ENV_IDS + TRAIN_ENV_IDS
 VEC_ENVS = ("subproc", "dummy")
 POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.controller.POSTURE_TARGETS (kept free of mink here)
@@ -106,9 +106,10 @@ class TrainConfig:
         pose_source, pose_error_deg, position_noise: the target pose estimate used in training
             (``position_noise`` > 0, m: the env's ``pose_source`` is ``NoisyPose(pose_error_deg,
             position_std=position_noise)``).
-        env_id: ``"SMS3DPick-v1"`` (its options as given here) or ``"SMS3DPickTrain-v1"`` (the
-            learnable options: latched suction, staged reward, dead-end episode end, task
-            observations; ``reward_type`` is then ignored and must stay at its default).
+        env_id: ``"SMS3DPick-v1"`` (default; its options as given here) or ``"SMS3DPickTrain-v1"``
+            (the learnable options: latched suction, staged reward, dead-end episode end, task
+            observations; ``reward_type`` is then ignored and must stay at its default), or
+            their v2 ids (``ENV_IDS``).
         normalize: standardise observations with running statistics (``VecNormalize``).
         normalize_reward: also scale training rewards by the running standard deviation of the
             discounted return (``VecNormalize(norm_reward=True)``; needs ``normalize``; logs,

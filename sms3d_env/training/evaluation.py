@@ -74,7 +74,7 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
                     0.0, actor.saved.get("reward_type", "dense"),
                     max_episode_steps or actor.saved.get("max_episode_steps", 250))
     if actor.env_id in TRAIN_ENV_IDS or "reward_type" not in actor.saved:
-        kw.pop("reward_type")  # the env id's own reward (SMS3DPickSparse-v0's is sparse)
+        kw.pop("reward_type")  # the env id's own reward (a training id's: staged)
     from sms3d_env.training.threads import torch_threads
 
     with torch_threads(1):  # per-step inference of a small MLP: more threads only add overhead

@@ -1,5 +1,5 @@
-"""Pick policies trained with stable-baselines3 (PPO or SAC) on ``SMS3DPick-v0`` or on the
-learnable options of ``SMS3DPickTrain-v0``.
+"""Pick policies trained with stable-baselines3 (PPO or SAC) on ``SMS3DPick-v2`` or on the
+learnable options of ``SMS3DPickTrain-v2`` (or their superseded v1 ids).
 
 ``train_policy(TrainConfig(...))`` trains with vectorised envs (``SubprocVecEnv`` for
 ``n_envs > 1``, or all in this process with ``vec_env="dummy"``), evaluates periodically (``eval/success_rate`` from the env's ``is_success``),

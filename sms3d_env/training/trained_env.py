@@ -80,13 +80,13 @@ def match_env(path: Path, signatures: tuple[Any, Any], candidates: tuple[str, ..
 
     matches = []
     for env_id in candidates:
-        with warnings.catch_warnings():  # gymnasium's "out of date" for a -v0 id: made to compare, not chosen
+        with warnings.catch_warnings():  # gymnasium's "out of date" for a -v1 id: made to compare, not chosen
             warnings.simplefilter("ignore", DeprecationWarning)
             observation, action = env_spaces(env_id)
         for space, keys in ((observation, None), (gym.spaces.flatten_space(observation), list(observation.spaces))):
             if (space_signature(space), space_signature(action)) == signatures:
                 matches.append(EnvMatch(env_id, space, action, keys))
-    # Versions of one env (SMS3DPickTrain-v0 and -v1 share their spaces): the latest, which
+    # Versions of one env (SMS3DPickTrain-v1 and -v2 share their spaces): the latest, which
     # supersedes the others (sms3d_env's docstring).
     versions = {parse_env_id(m.env_id)[:2]: m for m in matches}
     if len(versions) == 1:

@@ -1,6 +1,6 @@
 """The env's constructor: at most 16 arguments, each documented; the option records refuse bad
 fields by name; the options of earlier versions (saved runs, recipes, datasets) translate to the
-arguments that hold them now; the v0 ids keep their collision set whatever bed they are given."""
+arguments that hold them now."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ from sms3d_env.cameras import ImageObservation, RenderCamera
 from sms3d_env.controller import ControllerConfig
 from sms3d_env.env_args import translate_legacy_options
 from sms3d_env.physics_params import V1_PHYSICS, PickPhysicsParams
-from sms3d_env.pick_env import V0_CONTROLLER, V0_FREE_RADIUS, V0_SEAL, SMS3DPickEnv
+from sms3d_env.pick_env import SMS3DPickEnv
 from sms3d_env.pose_sources import NoisyPose
 from sms3d_env.records import record_of
 from sms3d_env.rewards import RewardConfig
@@ -68,36 +68,25 @@ def test_the_registered_ids_build_their_options_from_the_records():
     # v2's mushrooms collide, so its generated beds are placed with no overlap of their collision
     # hulls: the mapping form of a scene config says so by default (a SceneConfig object must).
     scenes = {env_id: SMALL_MAPPING if env_id.endswith("-v2") else SMALL
-              for env_id in ("SMS3DPick-v0", "SMS3DPickTrain-v0", "SMS3DPick-v1", "SMS3DPickTrain-v1",
-                             "SMS3DPick-v2", "SMS3DPickTrain-v2")}
+              for env_id in ("SMS3DPick-v1", "SMS3DPickTrain-v1", "SMS3DPick-v2", "SMS3DPickTrain-v2")}
     made = {env_id: gym.make(env_id, scene=scene).unwrapped for env_id, scene in scenes.items()}
     for env_id, env in made.items():
         version = env_id[-2:]
-        v0 = version == "v0"
         bed = SMALL_HULLS if version == "v2" else SMALL
-        assert env.scene_source.config == SceneSourceConfig(config=bed, free_radius=V0_FREE_RADIUS if v0 else None)
+        assert env.scene_source.config == SceneSourceConfig(config=bed)
         assert env.reward_config.kind == ("staged" if "Train" in env_id else "dense")
-        # v2: the class defaults (the harvest-ready target, PickPhysicsParams()); v1 and v0:
-        # v1's picking model (V1_PHYSICS) and the tallest target.
+        # v2: the class defaults (the harvest-ready target, PickPhysicsParams()); v1: its picking
+        # model (V1_PHYSICS) and the tallest target; both the records' controller.
         assert env.start is None
         assert env.target_rule == TargetRule("harvest_ready" if version == "v2" else "tallest")
-        # v0 keeps its 2 ms physics step and per-step seal rule; v1 and v2 have the records' defaults.
-        assert env.ctrl_cfg == ControllerConfig(**V0_CONTROLLER if v0 else {})
-        physics = {} if version == "v2" else {**V1_PHYSICS, **(V0_SEAL if v0 else {})}
-        assert env.params == PickPhysicsParams(**physics), env_id
+        assert env.ctrl_cfg == ControllerConfig()
+        assert env.params == PickPhysicsParams(**({} if version == "v2" else V1_PHYSICS)), env_id
+        assert type(env.robot_cfg).__name__ == "GantryConfig"
         env.close()
-    for env_id in ("SMS3DPick-v1", "SMS3DPick-v2"):
-        assert type(made[env_id].robot_cfg).__name__ == "GantryConfig"
-    assert type(made["SMS3DPick-v0"].robot_cfg).__name__ == "RobotConfig"
-
-
-def test_the_v0_ids_keep_their_radius_unless_the_scene_source_sets_one():
-    pooled = gym.make("SMS3DPick-v0", scene=SceneSourceConfig(config=SMALL, pool=2)).unwrapped
-    assert pooled.scene_source.config.free_radius == V0_FREE_RADIUS and pooled.scene_source.config.pool == 2
-    wider = gym.make("SMS3DPick-v0", scene={"config": SMALL, "free_radius": 0.2}).unwrapped
-    assert wider.scene_source.config.free_radius == 0.2
-    # The env's own default: every mushroom free (v1's and v2's).
+    # The env's own default: every mushroom free (v1's and v2's); a scene source's radius is kept.
     assert SMS3DPickEnv(scene=SMALL_MAPPING).scene_source.config.free_radius is None
+    wider = gym.make("SMS3DPick-v2", scene={"config": SMALL_MAPPING, "free_radius": 0.2}).unwrapped
+    assert wider.scene_source.config.free_radius == 0.2
 
 
 @pytest.mark.parametrize("scene, expected", [

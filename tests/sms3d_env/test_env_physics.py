@@ -10,10 +10,11 @@ import generator
 import sms3d_env
 from sms3d_env.physics import grip_utilisation
 from sms3d_env.physics_params import V1_PHYSICS
-from sms3d_env.pick_env import V0_SEAL
 from sms3d_env.pose_sources import NoisyPose, OraclePose
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
+#: SMALL in the mapping form: v2 places it with no two collision hulls interpenetrating.
+SMALL_MAPPING = {"placement": {"num_mushrooms": 8}}
 
 
 def test_holding_force_from_vacuum_and_area():
@@ -31,13 +32,13 @@ loads = st.floats(0.0, 10.0)
        compression=loads)
 def test_pressing_the_cup_on_the_cap_adds_to_the_seals_capacity(tension, shear, bend, twist, compression):
     """v1's seal carries shear, bending and twist against the holding force plus the cup's
-    compression of the cap; v0's (``V0_SEAL``) against the holding force alone; tension's
+    compression of the cap; without ``seal_preload`` against the holding force alone; tension's
     capacity is the holding force either way, and each capacity is reached exactly."""
     v1 = sms3d_env.PickPhysicsParams(**V1_PHYSICS)
-    v0 = sms3d_env.PickPhysicsParams(**V1_PHYSICS, **V0_SEAL)
+    unloaded = sms3d_env.PickPhysicsParams(**{**V1_PHYSICS, "seal_preload": False})
     load = (tension, shear, bend, twist)
     assert grip_utilisation(*load, v1, compression) <= grip_utilisation(*load, v1) + 1e-12
-    assert grip_utilisation(*load, v0, compression) == grip_utilisation(*load, v0)
+    assert grip_utilisation(*load, unloaded, compression) == grip_utilisation(*load, unloaded)
     normal = v1.holding_force + compression
     a, mu = v1.cup_radius, v1.shear_friction
     for capacity in ((v1.holding_force, 0, 0, 0), (0, mu * normal, 0, 0), (0, 0, normal * a / 2, 0),
@@ -57,7 +58,7 @@ def test_noisy_pose_error_is_exact():
 
 
 def test_target_override_and_rule():
-    env = gym.make("SMS3DPick-v0", scene=SMALL).unwrapped
+    env = gym.make("SMS3DPick-v2", scene=SMALL_MAPPING, target="tallest").unwrapped
     _, info = env.reset(seed=0, options={"target": 2})
     assert info["target"] == 2
     _, info = env.reset(seed=0)
@@ -68,7 +69,7 @@ def test_target_override_and_rule():
 
 
 def test_failure_cause_vocabulary():
-    env = gym.make("SMS3DPick-v0", scene=SMALL, max_episode_steps=5)
+    env = gym.make("SMS3DPick-v2", scene=SMALL_MAPPING, max_episode_steps=5)
     env.reset(seed=0)
     for _ in range(5):
         *_, te, tr, info = env.step(np.zeros(7, np.float32))

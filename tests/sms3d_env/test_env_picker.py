@@ -8,7 +8,7 @@ import sms3d_env
 
 
 def _wins(err: float, episodes: int = 40) -> tuple[int, int]:
-    env = gym.make("SMS3DPick-v0", pose_source="noisy", pose_error_deg=err)
+    env = gym.make("SMS3DPick-v2", pose_source="noisy", pose_error_deg=err)
     pol = sms3d_env.ScriptedPicker.for_env(env)
     res = [sms3d_env.run_episode(env, pol, seed=s) for s in range(episodes)]
     env.close()

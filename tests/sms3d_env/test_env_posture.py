@@ -15,7 +15,7 @@ from sms3d_env.training import imitation
 
 
 def _posture_after_turning(posture_target: str) -> tuple[np.ndarray, np.ndarray]:
-    env = gym.make("SMS3DPick-v0", controller={"posture_target": posture_target})
+    env = gym.make("SMS3DPick-v2", controller={"posture_target": posture_target})
     try:
         env.reset(seed=1)
         u = env.unwrapped
@@ -41,7 +41,7 @@ def test_the_tool_posture_follows_a_turn_beyond_five_degrees():
 
 def test_a_bad_posture_target_is_refused_by_name():
     with pytest.raises(ValueError, match="ControllerConfig.posture_target"):
-        gym.make("SMS3DPick-v0", controller={"posture_target": "home"})
+        gym.make("SMS3DPick-v2", controller={"posture_target": "home"})
 
 
 def test_the_training_recipes_know_the_same_posture_targets():
@@ -53,7 +53,7 @@ def test_the_training_recipes_know_the_same_posture_targets():
 def test_a_failed_posture_solve_waits_for_another_turn(monkeypatch):
     """A posture the IK cannot solve is not retried on every following step (it was: 289 failing
     solves in 1,783 steps of 10 scripted episodes at 30 deg)."""
-    env = gym.make("SMS3DPick-v0", controller={"posture_target": "tool"})
+    env = gym.make("SMS3DPick-v2", controller={"posture_target": "tool"})
     try:
         env.reset(seed=1)
         u = env.unwrapped

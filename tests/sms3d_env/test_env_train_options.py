@@ -1,4 +1,4 @@
-"""The training options of SMS3DPickEnv (SMS3DPickTrain-v0): latched suction, the staged reward,
+"""The training options of SMS3DPickEnv (SMS3DPickTrain-v2): latched suction, the staged reward,
 dead-end episode ends, observations in the estimated target frame, the wrist F/T, argument checks."""
 
 import math
@@ -19,7 +19,11 @@ from sms3d_env.scene_source import SceneSourceConfig
 from sms3d_env.task_obs import target_frame, tool_in_target, twist_about
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
-BED = generator.SceneConfig().replace(placement__num_mushrooms=25)
+# The mapping forms: v2 places the beds with no two collision hulls interpenetrating.
+SMALL_MAPPING = {"placement": {"num_mushrooms": 8}}
+BED = {"placement": {"num_mushrooms": 25}}
+#: SMALL as a SceneConfig object v2 takes: no two collision hulls interpenetrating.
+SMALL_HULLS = SMALL.replace(placement__overlap_iou=0.0, placement__overlap_solids="hulls")
 
 
 def _run_until_sealed(env, seed=0):
@@ -47,7 +51,7 @@ def test_latched_suction_keeps_the_seal_through_off_commands(mode, kept):
 def test_training_id_sets_the_options_and_passes_check_env():
     from gymnasium.utils.env_checker import check_env
 
-    env = gym.make("SMS3DPickTrain-v0", scene=SMALL)
+    env = gym.make("SMS3DPickTrain-v2", scene=SMALL_MAPPING)
     u = env.unwrapped
     assert (u.reward_config.kind, u.suction_mode, u.end_on_dead_end, u.task_obs) == ("staged", "latched", True, True)
     assert sms3d_env.TRAIN_OPTIONS["reward_type"] == "staged"
@@ -102,7 +106,7 @@ def test_scripted_success_is_reported_with_reward_terms(horizon):
     """The success step pays the steps left until the reward's horizon (the registered time limit,
     250, by default; the same bed, the same picks: only the last reward differs)."""
     reward = {} if horizon is None else {"reward_type": RewardConfig("staged", horizon)}
-    env = gym.make("SMS3DPickTrain-v0", scene=SMALL, **reward)
+    env = gym.make("SMS3DPickTrain-v2", scene=SMALL_MAPPING, **reward)
     picker = ScriptedPicker.for_env(env)
     obs, _ = env.reset(seed=1)
     done, rewards = False, []
@@ -126,7 +130,7 @@ def _nearest_neighbour_pose(scene, i, rng):
 
 @pytest.mark.parametrize("dead_end", [True, False])
 def test_a_latched_seal_on_a_neighbour_ends_the_episode(dead_end):
-    env = gym.make("SMS3DPick-v0", scene=BED, pose_source=_nearest_neighbour_pose,
+    env = gym.make("SMS3DPick-v2", scene=BED, pose_source=_nearest_neighbour_pose,
                    suction_mode="latched", end_on_dead_end=dead_end)
     picker = ScriptedPicker.for_env(env)
     obs, info = env.reset(seed=1)
@@ -168,7 +172,7 @@ def test_target_frame_entries_for_a_known_pose():
 
 
 def test_task_observation_matches_the_tool_and_estimate():
-    env = gym.make("SMS3DPickTrain-v0", scene=SMALL)
+    env = gym.make("SMS3DPickTrain-v2", scene=SMALL_MAPPING)
     obs, _ = env.reset(seed=3)
     for _ in range(4):
         obs, *_ = env.step(env.action_space.sample() * 0.3)
@@ -183,18 +187,18 @@ def test_task_observation_matches_the_tool_and_estimate():
 
 
 def test_wrist_sensor_reads_the_tool_weight_at_rest():
-    env = gym.make("SMS3DPickTrain-v0", scene=SMALL)
+    env = gym.make("SMS3DPickTrain-v2", scene=SMALL_MAPPING)
     obs, _ = env.reset(seed=0)
     for _ in range(10):
         obs, *_ = env.step(np.zeros(7, np.float32))
     m = env.unwrapped.model
-    tool = m.body("jaco/tool").id
+    tool = m.body(f"{env.unwrapped.robot_cfg.prefix}tool").id
     weight = m.body_subtreemass[tool] * 9.81
     assert np.linalg.norm(obs["wrist_wrench"][:3]) == pytest.approx(weight, rel=0.05)
 
 
 def test_step_after_the_end_warns_and_stays_terminated():
-    env = gym.make("SMS3DPickTrain-v0", scene=SMALL).unwrapped  # no TimeLimit/order wrapper
+    env = gym.make("SMS3DPickTrain-v2", scene=SMALL_MAPPING).unwrapped  # no TimeLimit/order wrapper
     picker = ScriptedPicker.for_env(env)
     obs, _ = env.reset(seed=1)
     terminated = False
@@ -240,7 +244,7 @@ def test_env_refuses_arguments_it_would_ignore_or_misread(kwargs, field):
 def test_gym_make_refuses_a_pose_error_the_oracle_would_ignore():
     with pytest.raises(ValueError, match=r"applies to pose_source='noisy' only; with pose_source='oracle' "
                                          r"it would be ignored \(got pose_error_deg=10"):
-        gym.make("SMS3DPick-v0", pose_source="oracle", pose_error_deg=10)
+        gym.make("SMS3DPick-v2", pose_source="oracle", pose_error_deg=10)
 
 
 _NON_FINITE_OR_NEGATIVE = st.one_of(st.floats(allow_nan=True, allow_infinity=True).filter(
@@ -309,11 +313,11 @@ def test_uniform_noisy_pose_errs_within_its_range():
 def test_scene_pool_reuses_beds_and_replays_episodes_exactly():
     from sms3d_env.pickers import run_episode
 
-    env = gym.make("SMS3DPickTrain-v0", scene=SceneSourceConfig(config=SMALL, pool=1, pool_seed=7))
+    env = gym.make("SMS3DPickTrain-v2", scene=SceneSourceConfig(config=SMALL_HULLS, pool=1, pool_seed=7))
     picker = ScriptedPicker.for_env(env)
     first = run_episode(env, picker, seed=4)
     assert env.unwrapped.scene is env.unwrapped.scene_source.pool[0]
-    expected = generator.generate_scene(SMALL, seed=7)
+    expected = generator.generate_scene(SMALL_HULLS, seed=7)
     np.testing.assert_array_equal(env.unwrapped.scene.terrain.heights, expected.terrain.heights)
     # The pool's compiled model is copied per episode: a replay is the same episode.
     again = run_episode(env, picker, seed=4)
@@ -326,7 +330,7 @@ def test_a_scene_pool_keeps_a_bounded_number_of_compiled_models(monkeypatch):
     from sms3d_env import scene_source
 
     monkeypatch.setattr(scene_source, "MAX_CACHED_MODELS", 2)
-    env = gym.make("SMS3DPick-v0", scene={"config": SMALL, "pool": 5}).unwrapped
+    env = gym.make("SMS3DPick-v2", scene={"config": SMALL_MAPPING, "pool": 5}).unwrapped
     seeds = range(8)
 
     def draws():

@@ -39,9 +39,27 @@ def test_gymnasium_and_sb3_check_env_pass(env_id, robot):
     sb3_check_env(env, warn=False)
 
 
-def test_v0_is_deprecated_in_favour_of_v1():
-    with pytest.warns(DeprecationWarning, match="out of date"):
-        gym.make("SMS3DPick-v0", scene=SMALL)
+@pytest.mark.parametrize("env_id, latest", [("SMS3DPick-v0", "SMS3DPick-v2"),
+                                             ("SMS3DPickTrain-v0", "SMS3DPickTrain-v2")])
+# Gymnasium warns that the version is out of date before it refuses it.
+@pytest.mark.filterwarnings("ignore:.*-v0 is out of date:DeprecationWarning")
+def test_the_removed_v0_ids_are_refused_naming_the_latest_version(env_id, latest):
+    from gymnasium.error import DeprecatedEnv
+
+    with pytest.raises(DeprecatedEnv, match=f"v0 for `{env_id[:-3]}` is deprecated. Please use `{latest}` instead"):
+        gym.make(env_id)
+
+
+def test_the_removed_sparse_id_is_unknown_to_gymnasium():
+    from gymnasium.error import NameNotFound
+
+    with pytest.raises(NameNotFound, match="SMS3DPickSparse` doesn't exist"):
+        gym.make("SMS3DPickSparse-v0")
+
+
+def test_v1_is_out_of_date_in_favour_of_v2():
+    with pytest.warns(DeprecationWarning, match="SMS3DPick-v1 is out of date.*`v2`"):
+        gym.make("SMS3DPick-v1", scene=SMALL).close()
 
 
 @pytest.mark.parametrize("bad", ["ur5", "", 3, None.__class__])
@@ -117,11 +135,12 @@ def test_the_gantry_pressing_into_the_soil_at_full_speed_stays_below_the_bruisin
     assert max(forces) <= u.robot_cfg.lift_force + 1e-9 < u.params.bruise_force
 
 
-def test_v1_refuses_the_jaco_whose_links_collide_with_nothing():
+def test_a_robot_config_of_its_own_defaults_is_the_hanging_jaco():
     from sms3d_env.robot import RobotConfig
+    from sms3d_env.robots import HANGING_JACO
 
-    with pytest.raises(ValueError, match="all_links_collide"):
-        gym.make("SMS3DPick-v1", robot=RobotConfig())
+    env = gym.make("SMS3DPick-v1", robot=RobotConfig(), scene=SMALL).unwrapped
+    assert env.robot_cfg == HANGING_JACO == gym.make("SMS3DPick-v1", robot="jaco", scene=SMALL).unwrapped.robot_cfg
 
 
 def test_one_compiled_model_serves_every_target_of_a_pool_bed():

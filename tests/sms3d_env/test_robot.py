@@ -10,13 +10,13 @@ import mujoco
 import numpy as np
 import pytest
 
-import generator
 import sms3d_env  # noqa: F401  (registers the ids)
 from sms3d_env.gantry import GantryConfig
 from sms3d_env.robot import TOOL_SITE, RobotConfig, arm_only_model
 from sms3d_env.robots import HANGING_JACO
 
-SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
+# The mapping form: v2's placement, no two collision hulls interpenetrating.
+SMALL = {"placement": {"num_mushrooms": 8}}
 
 TOOL_GEOMS = {
     "suction": ["jaco/tube", "jaco/flange", "jaco/cup_face"],
@@ -25,10 +25,10 @@ TOOL_GEOMS = {
 
 
 @pytest.mark.parametrize("tool", list(TOOL_GEOMS))
-def test_wrist_hand_and_tool_collide_with_soil_and_mushrooms_not_with_the_arm(tool, can_touch):
-    env = gym.make("SMS3DPick-v0", scene=SMALL, tool=tool).unwrapped
+def test_every_jaco_link_and_the_tool_collide_with_soil_and_mushrooms_not_with_each_other(tool, can_touch):
+    env = gym.make("SMS3DPick-v2", robot="jaco", scene=SMALL, tool=tool).unwrapped
     env.reset(seed=0)
-    m = env.model
+    m, w = env.model, env.world
     soil = m.geom("terrain").id
     cap = int(env.world.cap_geoms[env.picking.state.target])
     names = ["jaco/ring_5", "jaco/link_5", "jaco/ring_6", *TOOL_GEOMS[tool]]
@@ -40,20 +40,13 @@ def test_wrist_hand_and_tool_collide_with_soil_and_mushrooms_not_with_the_arm(to
     for g1 in geoms:
         for g2 in geoms:
             assert not can_touch(m, g1, g2)
-
-
-def test_the_jaco_of_v0_still_has_its_ghost_links(can_touch):
-    # The comparison the version history states: v0's base, shoulder, upper arm, forearm and
-    # first wrist link collide with nothing.
-    env = gym.make("SMS3DPick-v0", scene=generator.SceneConfig().replace(placement__num_mushrooms=10))
-    env.reset(seed=3)
-    m, w = env.unwrapped.model, env.unwrapped.world
+    # No link passes through the soil (the removed v0's Jaco had five that did).
     ghosts = {m.body(int(m.geom_bodyid[g])).name for g in np.nonzero(w.robot_geom)[0]
               if not can_touch(m, g, w.terrain_geom)}
-    assert ghosts == {f"jaco/{b}" for b in ("b_base", "b_1", "b_2", "b_3", "b_4")}
+    assert ghosts == set()
 
 
-ROBOT_CONFIGS = {"jaco-v0": RobotConfig(), "jaco": HANGING_JACO, "gantry": GantryConfig()}
+ROBOT_CONFIGS = {"jaco": HANGING_JACO, "gantry": GantryConfig()}
 
 
 @pytest.mark.parametrize("tool", ["suction", "hand"])

@@ -11,11 +11,12 @@ from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.robots import HANGING_JACO
 from sms3d_env.targets import Reachability
 
-SMALL = generator.SceneConfig().replace(placement__num_mushrooms=8)
+# The mapping form: v2 places the bed with no two collision hulls interpenetrating.
+SMALL = {"placement": {"num_mushrooms": 8}}
 
 
 def _reach_and_targets():
-    env = gym.make("SMS3DPick-v0", scene=SMALL)
+    env = gym.make("SMS3DPick-v2", robot="jaco", scene=SMALL)  # the arm: solves that can stall
     env.reset(seed=0)
     u = env.unwrapped
     return env, u.reach, [(np.asarray(i.cap_top), np.asarray(i.rotation)[:, 2]) for i in u.scene.instances]
@@ -57,7 +58,7 @@ def test_pool_episodes_are_the_same_with_and_without_the_cache():
     from the cache, every observation and reward equals a run whose cache is emptied each reset."""
     runs = []
     for keep in (True, False):
-        env = gym.make("SMS3DPickTrain-v0", scene={"config": SMALL, "pool": 2}, start={"share": 0.5})
+        env = gym.make("SMS3DPickTrain-v2", robot="jaco", scene={"config": SMALL, "pool": 2}, start={"share": 0.5})
         picker = ScriptedPicker.for_env(env)
         trace = []
         try:

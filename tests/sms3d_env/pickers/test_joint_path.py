@@ -13,6 +13,7 @@ from sms3d_env.pickers.episode import run_episode
 from sms3d_env.pickers.joint_path import JointSpaceTransfer, rotation_vector
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.posture import POSTURE_OFFSETS
+from sms3d_env.robot import RobotConfig
 from sms3d_env.robots import HANGING_JACO
 
 CTRL = ControllerConfig()
@@ -82,9 +83,10 @@ def test_a_pose_out_of_reach_plans_no_path_and_leaves_the_approach_cartesian():
     assert transfer.done
 
 
-@pytest.mark.parametrize(("robot", "transfers"), [("jaco", True), ("gantry", False), (None, False)])
+@pytest.mark.parametrize(("robot", "transfers"), [("jaco", True), ("gantry", False),
+                                                   (RobotConfig(approach="cartesian"), False)])
 def test_for_env_gives_the_transfer_to_the_robots_that_ask_for_it(robot, transfers):
-    env = gym.make("SMS3DPick-v1" if robot else "SMS3DPick-v0", **({"robot": robot} if robot else {}))
+    env = gym.make("SMS3DPick-v2", robot=robot)
     picker = ScriptedPicker.for_env(env)
     assert isinstance(picker.transfer, JointSpaceTransfer) == transfers
     env.close()

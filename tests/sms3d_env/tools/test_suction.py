@@ -110,8 +110,7 @@ def test_a_dead_end_is_a_target_knocked_off_or_a_latched_seal_on_a_neighbour(mak
 
 def _held_by_the_cup(env_id: str):
     """An env whose target is off its roots and sealed to the cup where the cup is now."""
-    cfg = generator.SceneConfig().replace(placement__num_mushrooms=4)
-    env = gym.make(env_id, scene=cfg).unwrapped
+    env = gym.make(env_id, scene={"placement": {"num_mushrooms": 4}}).unwrapped  # the id's own placement
     env.reset(seed=0)
     m, d = env.model, env.data
     k = env.picking.state.target
@@ -128,7 +127,7 @@ def _held_by_the_cup(env_id: str):
 def test_env_grip_wrench_is_about_the_cup_contact():
     """A detached mushroom held by the cup alone, with a known extra load: the env's seal reading
     is the weight plus the load, and its moment is taken about the cup face, not the stem base."""
-    env, k, b = _held_by_the_cup("SMS3DPick-v0")
+    env, k, b = _held_by_the_cup("SMS3DPick-v2")
     m, d = env.model, env.data
     m.body_gravcomp[b] = 0.0
     f_app = np.array([0.1, 0.05, -0.2])

@@ -144,11 +144,11 @@ def test_a_file_that_is_no_sb3_model_is_named_with_exit_2(tmp_path, capsys, kind
 
 
 def test_a_config_of_another_env_layout_is_named_before_the_first_step(tmp_path, capsys):
-    model = _copy_of_shipped(tmp_path / "run", {"env_id": "SMS3DPick-v0", "env_options": {}})
+    model = _copy_of_shipped(tmp_path / "run", {"env_id": "SMS3DPick-v2", "env_options": {}})
     config = tmp_path / "run" / "config.json"
     assert main(["eval-policy", "--model", str(model), "--episodes", "1"]) == 2
     out = capsys.readouterr().out
-    assert f"error: {config}: describes an env (SMS3DPick-v0" in out and "missing keys ['" in out
+    assert f"error: {config}: describes an env (SMS3DPick-v2" in out and "missing keys ['" in out
     with pytest.raises(PolicyFileError, match="missing keys"):
         make_picker_env(parse_picker(f"policy:{model}"))
     config.write_text("{cut")

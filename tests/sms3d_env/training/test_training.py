@@ -146,7 +146,7 @@ def test_a_run_of_a_removed_experiment_is_refused_saying_why(tmp_path):
     removed fields at their defaults still reads."""
     from sms3d_env.training.actor import PolicyActor
 
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", total_steps=128, n_steps=128, batch_size=64,
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v2", total_steps=128, n_steps=128, batch_size=64,
                       out=str(tmp_path / "run"), **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
     train_policy(cfg)
     config = tmp_path / "run" / "config.json"
@@ -218,7 +218,7 @@ def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
 
     for normalize in (True, False):
         out = tmp_path / str(normalize)
-        cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", total_steps=256, n_steps=128, batch_size=64,
+        cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v2", total_steps=256, n_steps=128, batch_size=64,
                           normalize=normalize, out=str(out), **{**FAST, "checkpoint_freq": 0})
         train_policy(cfg)
         actor = PolicyActor(out / "best" / "best_model.zip")
@@ -363,7 +363,7 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     from sms3d_env.training.rl import InitModelError, _build_model, _start_from
 
     first = tmp_path / "first"
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", total_steps=128, n_steps=128, batch_size=64,
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v2", total_steps=128, n_steps=128, batch_size=64,
                       normalize=True, out=str(first), **{**FAST, "eval_freq": 0})
     train_policy(cfg)
     checkpoint = first / "checkpoints" / "ppo_128_steps.zip"
@@ -372,7 +372,7 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     assert (first / "obs_rms.npz").is_file() and not list(first.rglob("*.pkl"))
     assert observation_stats_path(checkpoint) == first / "checkpoints" / "ppo_obs_rms_128_steps.npz"
     actor = PolicyActor(checkpoint)
-    assert actor.env_id == "SMS3DPickTrain-v0" and actor.obs_stats is not None
+    assert actor.env_id == "SMS3DPickTrain-v2" and actor.obs_stats is not None
 
     again = TrainConfig(**{**cfg.__dict__, "out": str(tmp_path / "second"), "init_model": str(checkpoint)})
     env = normalized(vec_env(again.env_kwargs(), 1, 0, None), training=True)
@@ -428,7 +428,7 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
     from sms3d_env.training.actor import PolicyActor
     from sms3d_env.training.envs import make_env, vec_env
 
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", n_envs=2, vec_env="dummy", flat_observation=True,
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v2", n_envs=2, vec_env="dummy", flat_observation=True,
                       normalize=True, total_steps=256, n_steps=64, batch_size=64, out=str(tmp_path),
                       **{**FAST, "checkpoint_freq": 0})
     venv = vec_env(cfg.env_kwargs(), 2, 0, None, cfg.vec_env)
@@ -441,7 +441,7 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
     assert type(model.policy).__name__ == "ActorCriticPolicy"  # MlpPolicy, not MultiInputActorCriticPolicy
     actor = PolicyActor(tmp_path / "model.zip")
     bed = {"scene": {"placement": {"num_mushrooms": 8}}}
-    env, flat_env = actor.make_env(**bed), make_env("SMS3DPickTrain-v0", flat_observation=True, **bed)
+    env, flat_env = actor.make_env(**bed), make_env("SMS3DPickTrain-v2", flat_observation=True, **bed)
     try:
         obs, _ = env.reset(seed=3)
         flat, _ = flat_env.reset(seed=3)
@@ -459,7 +459,7 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
 def test_normalised_rewards_are_scaled_by_the_discounted_returns_spread(tmp_path):
     from sms3d_env.training.model_files import ObservationStats
 
-    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v0", n_envs=2, vec_env="dummy", flat_observation=True,
+    cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v2", n_envs=2, vec_env="dummy", flat_observation=True,
                       normalize=True, normalize_reward=True, total_steps=256, n_steps=64, batch_size=64,
                       out=str(tmp_path), **{**FAST, "checkpoint_freq": 0})
     train_policy(cfg)

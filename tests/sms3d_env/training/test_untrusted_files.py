@@ -115,7 +115,7 @@ def test_a_model_sb3_saved_runs_in_the_env_its_spaces_are_with_nothing_unpickled
     with monkeypatch.context() as m:
         no_unpickling(m)
         actor = PolicyActor(path)
-        # SMS3DPickTrain-v0 and -v1 (ENV_ID, where it trained) have the same spaces; v2 supersedes them.
+        # SMS3DPickTrain-v1 (ENV_ID, where it trained) and -v2 have the same spaces; v2 supersedes v1.
         assert actor.env_id == NEWEST_ENV_ID
         assert PolicyActor(path, env_id=ENV_ID).env_id == ENV_ID
     env = actor.make_env(scene={"placement": {"num_mushrooms": 8}})
@@ -143,25 +143,45 @@ def test_an_env_id_given_against_the_models_record_is_refused_by_name(tmp_path, 
     with zipfile.ZipFile(tmp_path / "model.zip") as z:
         assert read_policy_spec(z).env_id == ENV_ID
     assert PolicyActor(tmp_path / "model.zip").env_id == ENV_ID
-    with pytest.raises(ConfigError, match=f"env_id: SMS3DPickTrain-v0 differs from {ENV_ID}, the env that "
+    with pytest.raises(ConfigError, match=f"env_id: {NEWEST_ENV_ID} differs from {ENV_ID}, the env that "
                                           f"{tmp_path / 'model.zip'} says"):
-        PolicyActor(tmp_path / "model.zip", env_id="SMS3DPickTrain-v0")
+        PolicyActor(tmp_path / "model.zip", env_id=NEWEST_ENV_ID)
     (tmp_path / "config.json").write_text(json.dumps({"env_id": ENV_ID, "algo": "ppo"}))
     assert main(["eval-policy", "--model", str(tmp_path / "model.zip"), "--env-id", "SMS3DPick-v1"]) == 2
     assert capsys.readouterr().out.startswith(f"error: argument --env-id: SMS3DPick-v1 differs from {ENV_ID}, the "
                                               f"env that {tmp_path / 'config.json'} says")
 
 
-def test_a_model_whose_spaces_fit_several_envs_is_refused_naming_them(tmp_path):
-    env = gym.make("SMS3DPick-v0")
-    PPO("MultiInputPolicy", env, n_steps=64, batch_size=64, device="cpu").save(tmp_path / "model.zip")
+@pytest.fixture
+def sparse_copy():
+    """A second env of this package with SMS3DPick's spaces (registered for the test alone):
+    the package's own ids have one env per set of spaces, in versions."""
+    from gymnasium.envs.registration import register, registry
+
+    register(id="SMS3DPickSparseCopy-v0", entry_point="sms3d_env.pick_env:SMS3DPickEnv",
+             max_episode_steps=250, kwargs={"reward_type": "sparse"})
+    yield "SMS3DPickSparseCopy-v0"
+    del registry["SMS3DPickSparseCopy-v0"]
+
+
+def _untrained_model(path):
+    env = gym.make("SMS3DPick-v2")
+    PPO("MultiInputPolicy", env, n_steps=64, batch_size=64, device="cpu").save(path)
     env.close()
-    # SMS3DPick-v1 and -v2 too (their robot has the Jaco's action space): two envs, the one in three
-    # versions.
-    with pytest.raises(PolicyFileError, match="are those of SMS3DPick-v0, SMS3DPickSparse-v0, SMS3DPick-v1, "
-                                              "SMS3DPick-v2; name its env with --env-id"):
-        PolicyActor(tmp_path / "model.zip")
-    assert PolicyActor(tmp_path / "model.zip", env_id="SMS3DPickSparse-v0").env_id == "SMS3DPickSparse-v0"
+    return path
+
+
+def test_a_model_whose_spaces_fit_versions_of_one_env_runs_in_the_latest(tmp_path):
+    # SMS3DPick-v1 has v2's spaces: one env in two versions.
+    assert PolicyActor(_untrained_model(tmp_path / "model.zip")).env_id == "SMS3DPick-v2"
+
+
+def test_a_model_whose_spaces_fit_several_envs_is_refused_naming_them(tmp_path, sparse_copy):
+    model = _untrained_model(tmp_path / "model.zip")
+    with pytest.raises(PolicyFileError, match=f"are those of SMS3DPick-v1, SMS3DPick-v2, {sparse_copy}; "
+                                              "name its env with --env-id"):
+        PolicyActor(model)
+    assert PolicyActor(model, env_id=sparse_copy).env_id == sparse_copy
 
 
 def _rewritten(src, dst, members):
