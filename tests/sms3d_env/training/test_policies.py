@@ -126,9 +126,11 @@ def test_sweep_runs_a_learned_picker_on_the_same_episodes(bc_run, tmp_path):
 def test_the_shipped_policy_loads_and_was_trained_on_the_training_id():
     assert SHIPPED_POLICY.is_file(), "sms3d_env/weights/pick_policy/model.zip is not in the package"
     actor = PolicyActor(SHIPPED_POLICY)
-    assert actor.env_id == "SMS3DPickTrain-v1"
+    assert actor.env_id == "SMS3DPickTrain-v2"
     metrics = json.loads((SHIPPED_POLICY.parent / "metrics.json").read_text())
-    assert metrics["oracle"]["successes"] / metrics["oracle"]["episodes"] >= 0.5
+    # What the package promises of it: at least 95 % of what the scripted picker picks on the same episodes.
+    for condition in ("oracle", "noisy_10deg"):
+        assert metrics[condition]["successes"] >= 0.95 * metrics[condition]["scripted_successes"], condition
 
 
 def test_learning_curve_reads_evaluations_with_their_wall_time(tmp_path, capsys):
