@@ -10,7 +10,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADLINE = json.loads((ROOT / "benchmarks" / "headline.json").read_text(encoding="utf-8"))
-ROBOTS = HEADLINE["scripted_picker_per_robot"]
+ROBOTS = HEADLINE["scripted_picker_per_robot"]  # SMS3DPick-v2
+ROBOTS_V1 = HEADLINE["scripted_picker_per_robot_v1"]  # history
+TOLERANCE = HEADLINE["tolerance_table"]
 PIXELS = HEADLINE["picking_from_pixels"]
 POLICY = HEADLINE["shipped_policy"]
 SPEED = HEADLINE["env_speed"]
@@ -29,30 +31,50 @@ def _section(text, heading):
     return rest[: end.start() if end else len(rest)]
 
 
-def robot_row(robot):
+def robot_row(robot, entry=ROBOTS):
     """The per-robot table row: successes per error (failure causes when any), cycle time at 0°."""
-    n = ROBOTS["episodes"]
+    n = entry["episodes"]
     cells = []
-    for wins, causes in zip(ROBOTS["successes"][robot], ROBOTS["failures"][robot], strict=True):
+    for wins, causes in zip(entry["successes"][robot], entry["failures"][robot], strict=True):
         assert sum(causes.values()) == n - wins, f"{robot}: failure causes do not add up to the failures"
         why = ", ".join(f"{cause.replace('_', ' ')} {k}" for cause, k in sorted(causes.items()))
         cells.append(f"{wins}/{n}" if wins == n else f"{wins} ({why})")
-    cycle = ROBOTS["cycle_time_s_at_0_deg"][robot]
+    cycle = entry["cycle_time_s_at_0_deg"][robot]
     return f"| {robot} | " + " | ".join(cells) + f" | {cycle['median']:.2f} / {cycle['p90']:.2f} s |"
 
 
 def robots_answer():
-    """The answer table's sentence on the scripted picker per robot (exact poses, and at 30°)."""
+    """The answer table's sentence on the scripted picker per robot (exact poses, harvest-ready targets)."""
     n, gantry, jaco = ROBOTS["episodes"], ROBOTS["successes"]["gantry"], ROBOTS["successes"]["jaco"]
-    at_30 = ROBOTS["errors_deg"].index(30)
-    exact = (f"{gantry[0]}/{n} with exact poses on both robots" if gantry[0] == jaco[0]
-             else f"{gantry[0]}/{n} (gantry) and {jaco[0]}/{n} (Jaco) with exact poses")
-    return f"{exact}, {gantry[at_30]}/{n} (gantry) and {jaco[at_30]}/{n} (Jaco) at a 30° axis error"
+    exact = (f"{gantry[0]}/{n} on both robots" if gantry[0] == jaco[0]
+             else f"{gantry[0]}/{n} (gantry) and {jaco[0]}/{n} (Jaco)")
+    return f"{exact} with exact poses on harvest-ready targets"
 
 
-def robots_benchmark_cell():
-    n, errors = ROBOTS["episodes"], " / ".join(f"{e:g}" for e in ROBOTS["errors_deg"])
-    per = {robot: " / ".join(str(k) for k in wins) for robot, wins in ROBOTS["successes"].items()}
+def tolerance_answer():
+    """The answer table's sentence on the tolerance table: the 25 mm cup per lip compliance."""
+    cup = TOLERANCE["tolerated_deg"]["25"][TOLERANCE["default_twist_torque"]]
+    s = " / ".join(f"{v:g}" for v in TOLERANCE["lip_compliance_mm"])
+    return f"a 25 mm cup whose lip absorbs S = {s} mm tolerates **{' / '.join(f'{v:g}' for v in cup)}°** of stem-axis error"
+
+
+def tolerance_rows():
+    """The study's tolerance table, its first six columns per cup, torque and lip compliance."""
+    import math
+
+    rows = []
+    for cup, per_torque in TOLERANCE["tolerated_deg"].items():
+        for torque, tolerated in per_torque.items():
+            for s, deg in zip(TOLERANCE["lip_compliance_mm"], tolerated, strict=True):
+                limit = math.degrees(math.atan(s / float(cup)))
+                rows.append(f"| {TOLERANCE['robot']} | {s:g} | {cup} | {torque} | {limit:.1f} | "
+                            f"{'< 0' if deg is None else f'{deg:g}'} |")
+    return rows
+
+
+def robots_benchmark_cell(entry=ROBOTS):
+    n, errors = entry["episodes"], " / ".join(f"{e:g}" for e in entry["errors_deg"])
+    per = {robot: " / ".join(str(k) for k in wins) for robot, wins in entry["successes"].items()}
     return f"gantry {per['gantry']} and Jaco {per['jaco']} of {n} at {errors}°"
 
 
@@ -66,7 +88,9 @@ def pixels_answer():
 
 
 def policy_answer():
-    return f"the shipped policy {POLICY['successes']}/{POLICY['episodes']}"
+    n, at_10 = POLICY["episodes"], POLICY["at_10_deg"]
+    return (f"the shipped policy {POLICY['successes']}/{n} with exact poses and {at_10['successes']}/{n} at a 10° "
+            f"axis error (the scripted picker {POLICY['scripted_successes']}/{n} and {at_10['scripted_successes']}/{n})")
 
 
 def speed_benchmark_cell():
@@ -87,10 +111,15 @@ def speed_results_row():
 
 
 QUOTES = {
-    "README.md": [robots_answer, pixels_answer, policy_answer, lambda: robot_row("gantry"), lambda: robot_row("jaco")],
-    "docs/index.md": [robots_answer, pixels_answer, policy_answer],
-    "docs/benchmarks.md": [robots_benchmark_cell, speed_benchmark_cell, fetch_benchmark_cell],
-    "docs/results-environment.md": [lambda: robot_row("gantry"), lambda: robot_row("jaco"), speed_results_row],
+    "README.md": [tolerance_answer, robots_answer, pixels_answer, policy_answer, lambda: robot_row("gantry"),
+                  lambda: robot_row("jaco")],
+    "docs/index.md": [tolerance_answer, robots_answer, pixels_answer, policy_answer],
+    "docs/benchmarks.md": [robots_benchmark_cell, lambda: robots_benchmark_cell(ROBOTS_V1), speed_benchmark_cell,
+                           fetch_benchmark_cell],
+    "docs/study.md": [lambda row=row: row for row in tolerance_rows()],
+    "docs/results-environment.md": [lambda: robot_row("gantry"), lambda: robot_row("jaco"),
+                                    lambda: robot_row("gantry", ROBOTS_V1), lambda: robot_row("jaco", ROBOTS_V1),
+                                    speed_results_row],
 }
 
 
@@ -101,19 +130,21 @@ def test_page_quotes_the_headline_numbers(name):
     assert missing == [], f"{name} does not quote benchmarks/headline.json; expected, verbatim:\n" + "\n".join(missing)
 
 
-@pytest.mark.parametrize("name, heading", [
-    ("README.md", "SMS3DPick-v1: the scripted picker per robot"),
-    ("docs/results-environment.md", "The scripted picker on SMS3DPick-v1, per robot"),
+@pytest.mark.parametrize("name, heading, entry", [
+    ("README.md", "SMS3DPick-v2: the scripted picker per robot", ROBOTS),
+    ("docs/results-environment.md", "The scripted picker on SMS3DPick-v2, per robot", ROBOTS),
+    ("docs/results-environment.md", "The scripted picker on SMS3DPick-v1, per robot", ROBOTS_V1),
 ])
-def test_per_robot_table_holds_only_the_headline_rows(name, heading):
+def test_per_robot_table_holds_only_the_headline_rows(name, heading, entry):
     rows = [line for line in _section(_text(name), heading).splitlines() if line.startswith(("| gantry |", "| jaco |"))]
-    assert rows == [robot_row("gantry"), robot_row("jaco")]
+    assert rows == [robot_row("gantry", entry), robot_row("jaco", entry)]
 
 
 @pytest.mark.parametrize("name", ["README.md", "docs/index.md", "docs/benchmarks.md"])
 def test_no_stale_count_of_the_per_robot_sweep(name):
     n = ROBOTS["episodes"]
-    measured = {k for wins in ROBOTS["successes"].values() for k in wins}
+    assert ROBOTS_V1["episodes"] == n, "the sweep counts of both versions are x/400"
+    measured = {k for entry in (ROBOTS, ROBOTS_V1) for wins in entry["successes"].values() for k in wins}
     text = _text(name)
     quoted = [int(k) for k in re.findall(rf"\b(\d+)/{n}\b", text)]
     quoted += [int(k) for run in re.findall(rf"\b((?:\d+ / )+\d+) of {n}\b", text) for k in run.split(" / ")]
