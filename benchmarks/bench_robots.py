@@ -56,7 +56,8 @@ def physics_overrides(items: list[str]) -> dict[str, float]:
 
 
 def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = ControllerConfig.substeps,
-             target: str | None = None, physics: dict | None = None, env_id: str = "SMS3DPick-v2") -> dict:
+             target: str | None = None, physics: dict | None = None, env_id: str = "SMS3DPick-v2",
+             tool: str | None = None) -> dict:
     from dataclasses import replace
 
     import gymnasium as gym
@@ -65,7 +66,7 @@ def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = Contro
     from sms3d_env.pickers.episode import run_episode
     from sms3d_env.pickers.scripted import ScriptedPicker
 
-    kwargs = {} if target is None else {"target": target}
+    kwargs = {k: v for k, v in (("target", target), ("tool", tool)) if v is not None}
     env = gym.make(env_id, robot=robot, scene={"placement": {"num_mushrooms": 25}},
                    pose_source="noisy" if error_deg else "oracle", pose_error_deg=error_deg,
                    controller=ControllerConfig(substeps=substeps), **kwargs)
@@ -85,7 +86,8 @@ def run_cell(robot: str, error_deg: float, episodes: int, substeps: int = Contro
     causes = collections.Counter(outcomes)
     grip, twist, lift = np.median(phases, axis=0).tolist() if phases else (None, None, None)
     return {"robot": robot, "error_deg": error_deg, "episodes": episodes, "substeps": substeps,
-            "env_id": env_id, "target": env.unwrapped.target_rule.rule, "physics": physics or {},
+            "env_id": env_id, "target": env.unwrapped.target_rule.rule, "tool": env.unwrapped.tool,
+            "physics": physics or {},
             "success": causes.pop("success", 0), "failures": dict(causes),
             "time_median_s": float(np.median(times)) if times else None,
             "time_p90_s": float(np.percentile(times, 90)) if times else None,
@@ -108,11 +110,13 @@ def main() -> None:
     parser.add_argument("--env-id", default="SMS3DPick-v2", help="a registered SMS3DPick id (default SMS3DPick-v2)")
     parser.add_argument("--physics", nargs="*", default=[], metavar="NAME=VALUE",
                         help="PickPhysicsParams fields to set, e.g. lip_seal=1 lip_compliance=0.003")
+    parser.add_argument("--tool", choices=["suction", "hand"], default=None,
+                        help="the robot's tool (default: its own, the suction cup)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", default=None, help="also write the rows here")
     args = parser.parse_args()
     physics = physics_overrides(args.physics)
-    cells = [(r, e, args.episodes, args.substeps, args.target, physics, args.env_id)
+    cells = [(r, e, args.episodes, args.substeps, args.target, physics, args.env_id, args.tool)
              for r in args.robots for e in args.errors]
     with get_context("spawn").Pool(args.workers) as pool:
         # imap keeps the cells' order; the bar counts finished (robot, error) cells.
