@@ -29,10 +29,10 @@ def main() -> None:
                     help="the strip of frames (default out/examples/picker_strip.png; the repository ignores out/)")
     ap.add_argument("--video", default=None, help="also write the pick as this MP4")
     args = ap.parse_args()
-    env = gym.make("SMS3DPick-v1", pose_source="noisy", pose_error_deg=args.pose_error_deg, robot=args.robot,
+    env = gym.make("SMS3DPick-v2", pose_source="noisy", pose_error_deg=args.pose_error_deg, robot=args.robot,
                    tool=args.tool, render_mode="rgb_array", render_camera={"size": (240, 320)})
     picker = sms3d_env.ScriptedPicker.for_env(env)  # the hand's picker with the hand
-    title = (f"Scripted picker, SMS3DPick-v1 {args.robot} with the {args.tool} tool, "
+    title = (f"Scripted picker, SMS3DPick-v2 {args.robot} with the {args.tool} tool, "
              f"{args.pose_error_deg:g} deg pose error, seed {args.seed}")
     for path in (args.out, args.video):
         if path:
