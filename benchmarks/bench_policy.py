@@ -25,6 +25,7 @@ from tqdm import tqdm  # noqa: E402
 
 from sms3d_env.pickers.episode import run_episode  # noqa: E402
 from sms3d_env.pickers.registry import make_picker_env, parse_picker  # noqa: E402
+from sms3d_env.robots import registered_robots  # noqa: E402
 from sms3d_env.study.statistics import mcnemar_p, wilson_interval  # noqa: E402
 
 
@@ -57,7 +58,7 @@ def main() -> None:
     ap.add_argument("--beds", type=int, nargs="+", default=[10, 25], help="mushrooms per bed")
     ap.add_argument("--errors", type=float, nargs="+", default=[0.0], help="pose errors (deg)")
     ap.add_argument("--seed", type=int, default=2_000_000)
-    ap.add_argument("--robot", choices=["gantry", "jaco"], default=None,
+    ap.add_argument("--robot", choices=registered_robots(), default=None,
                     help="the robot every picker acts on (default: the scripted picker's SMS3DPick-v2 gantry, "
                          "a learned picker's own)")
     ap.add_argument("--json", default=None)

@@ -28,6 +28,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sms3d_env.controller import ControllerConfig
+from sms3d_env.robots import registered_robots
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -102,7 +103,7 @@ def _cell(args: tuple) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--robots", nargs="+", default=["gantry", "jaco"])
+    parser.add_argument("--robots", nargs="+", default=list(registered_robots()), choices=registered_robots())
     parser.add_argument("--errors", type=float, nargs="+", default=[0.0, 10.0, 20.0, 30.0])
     parser.add_argument("--substeps", type=int, default=ControllerConfig.substeps,
                         help="physics steps per 40 ms control step (ControllerConfig.substeps; default 10 x 4 ms)")

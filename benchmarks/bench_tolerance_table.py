@@ -27,6 +27,7 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_robots import run_cell  # noqa: E402
 
+from sms3d_env.robots import registered_robots  # noqa: E402
 from sms3d_env.study.statistics import wilson_interval  # noqa: E402
 
 #: Success share an error must reach (at it and every smaller error) to be tolerated.
@@ -55,7 +56,7 @@ def tolerance(rows: list[dict]) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--robots", nargs="+", default=["gantry"])
+    ap.add_argument("--robots", nargs="+", default=["gantry"], choices=registered_robots())
     ap.add_argument("--lip-compliance", type=float, nargs="+", default=[0.003, 0.005, 0.007], help="S (m)")
     ap.add_argument("--cup-radius", type=float, nargs="+", default=[0.010], help="m")
     ap.add_argument("--twist-torque", type=float, nargs="+", default=[0.015, 0.03, 0.06], help="N m")

@@ -25,7 +25,8 @@ _EXPORTS = {
     "NoisyPose": "pose_sources", "OraclePose": "pose_sources", "PoseEstimate": "pose_sources",
     "PoseSource": "pose_sources", "UniformNoisyPose": "pose_sources", "make_pose_source": "pose_sources",
     "Tool": "tools", "TOOLS": "robot", "RobotConfig": "robot",
-    "GantryConfig": "gantry", "ROBOTS": "robot_names", "make_robot": "robots",
+    "GantryConfig": "gantry", "ROBOTS": "robots", "make_robot": "robots", "register_robot": "robots",
+    "registered_robots": "robots", "RobotSpec": "robots",
     "HandPicker": "pickers.scripted", "ScriptedPicker": "pickers.scripted", "run_episode": "pickers.episode",
 }  # fmt: skip
 

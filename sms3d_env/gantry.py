@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import ClassVar
-
-import mujoco
+from typing import TYPE_CHECKING, ClassVar
 
 from sms3d_env.robot import ROBOT_CONAFFINITY, TOOL_CONTYPE, Tool, check_tool_fields, mount_tool
+from sms3d_env.robot_registry import register_robot
+
+if TYPE_CHECKING:
+    import mujoco
 
 GANTRY_PREFIX = "gantry/"
 GANTRY_JOINTS: tuple[str, ...] = ("rail_x", "rail_y", "lift_z", "wrist_roll", "wrist_pitch", "tool_spin")
@@ -23,6 +25,7 @@ GANTRY_XML = os.path.join(os.path.dirname(__file__), "assets", "gantry.xml")
 _SLIDES = GANTRY_JOINTS[:3]
 
 
+@register_robot("gantry")
 @dataclass(frozen=True)
 class GantryConfig:
     """The gantry's drives and tool.
@@ -78,15 +81,17 @@ class GantryConfig:
 
     def __post_init__(self) -> None:
         check_tool_fields(self)
-        if len(self.home_q) != 6:
-            raise ValueError(f"GantryConfig.home_q must have 6 entries, got {len(self.home_q)}")
+        if len(self.home_q) != len(self.joints):
+            raise ValueError(f"{type(self).__name__}.home_q must have {len(self.joints)} entries, got {len(self.home_q)}")
         for name in ("slide_kp", "slide_force", "lift_force", "slide_armature", "wrist_kp", "wrist_force",
                      "wrist_armature"):
             value = getattr(self, name)
             if not value > 0:
-                raise ValueError(f"GantryConfig.{name} must be > 0, got {value!r}")
+                raise ValueError(f"{type(self).__name__}.{name} must be > 0, got {value!r}")
 
     def build_spec(self) -> mujoco.MjSpec:
+        import mujoco
+
         spec = mujoco.MjSpec.from_file(GANTRY_XML)
         for body in spec.bodies[2:]:  # everything that moves (world and the static frame aside)
             body.gravcomp = 1.0

@@ -47,9 +47,9 @@ from sms3d_env.world import PICK_CAMERA, PICK_CAMERA_DISTANCE, World, build_worl
 __all__ = ["FAILURE_CAUSES", "SUCTION_MODES", "SMS3DPickEnv"]
 
 _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
-# State observation entries and their sizes, in the order of the flat vector they are cut from.
-_OBS_SIZES = {"joint_pos": 6, "joint_vel": 6, "tool_pose": 7, "suction": 3, "target_pose": 6,
-              "target_rel": 3}
+# State observation entries after the joints' (one entry per robot joint each: ``joint_pos``,
+# ``joint_vel``) and their sizes, in the order of the flat vector they are cut from.
+_OBS_SIZES = {"tool_pose": 7, "suction": 3, "target_pose": 6, "target_rel": 3}
 
 
 def _slices(sizes: dict[str, int]) -> dict[str, slice]:
@@ -77,7 +77,7 @@ class SMS3DPickEnv(gym.Env):
 
     | key | size | content |
     | --- | --- | --- |
-    | ``joint_pos``, ``joint_vel`` | 6, 6 | arm joints (rad, rad/s) |
+    | ``joint_pos``, ``joint_vel`` | one per robot joint (6, 6 for the gantry and the Jaco) | the robot's driven joints, ``robot.joints`` (rad or m, rad/s or m/s) |
     | ``tool_pose`` | 7 | tool site position (m) and quaternion (w, x, y, z) |
     | ``suction`` | 3 | suction: (on, sealed, seal load / capacity); hand: (closure 0–1, holding with ≥ 2 fingers, finger force on the target N) |
     | ``target_pose`` | 6 | the *estimated* cap top (m) and stem axis (from the pose source) |
@@ -122,7 +122,7 @@ class SMS3DPickEnv(gym.Env):
     | Parameter | Type | Default | Description |
     | --- | --- | --- | --- |
     | ``render_mode`` | ``str`` or None | None | ``"rgb_array"``, ``"depth_array"`` (metric depth in metres) or ``"human"`` (MuJoCo's passive viewer, synced at every reset and step, closed by ``close()``; it needs a display, see :mod:`sms3d_env.viewer`, else ``DisplayUnavailableError``) |
-    | ``robot`` | ``str``, ``GantryConfig``, ``RobotConfig`` or None | ``"gantry"`` | ``"gantry"`` (the Cartesian harvester of :mod:`sms3d_env.gantry`) or ``"jaco"`` (the Kinova Jaco hanging above the bed), or a robot config; every link of either collides with the soil and the mushrooms. None: the default, ``"gantry"`` |
+    | ``robot`` | ``str``, a robot configuration (``RobotSpec``: ``GantryConfig``, ``RobotConfig``, ...) or None | ``"gantry"`` | a registered robot's name (``sms3d_env.registered_robots()``): ``"gantry"`` (the Cartesian harvester of :mod:`sms3d_env.gantry`), ``"jaco"`` (the Kinova Jaco hanging above the bed) or one added with ``sms3d_env.register_robot`` (docs/add-a-robot.md); or a robot configuration; every link of either built-in robot collides with the soil and the mushrooms. None: the default, ``"gantry"`` |
     | ``tool`` | ``str`` or None | None | ``"suction"`` or ``"hand"``; overrides the robot's tool (default: ``"suction"``) |
     | ``scene`` | ``SceneSourceConfig``, ``generator.SceneConfig``, a list of ``generator.Scene``, a dataset folder, or None | None | where each reset's bed comes from and which mushrooms can move (:class:`~sms3d_env.scene_source.SceneSourceConfig`: generated beds, a fixed list, a pool, ``free_radius``). A ``SceneConfig`` (or its mapping form, e.g. ``{"placement": {"num_mushrooms": 10}}``): a new bed of it per reset; scenes or a ``sms3d generate`` folder (checksums verified): one drawn per reset (``options={"scene": k}``); None: a new 25-mushroom bed per reset, every mushroom free |
     | ``target`` | ``str`` or ``TargetRule`` | ``"harvest_ready"`` | which mushroom is picked (:class:`~sms3d_env.targets.TargetRule`), drawn uniformly within a class: ``"harvest_ready"`` (a reachable cap of at least ``harvest_diameter``, 50 mm: what a farm picks now), ``"isolated"``, ``"crowded"``, ``"approach_blocked"``, ``"small"``; or ``"tallest"`` (v1's), ``"largest"``, ``"random"``, ``"index"`` with its ``index``; ``max_tilt_deg``; ``options={"target": i}`` picks mushroom ``i`` for one reset |
@@ -241,7 +241,8 @@ class SMS3DPickEnv(gym.Env):
         self.posture = IKPosture(self.ik, self.reach, self.home_q)
         self.action_space = spaces.Box(-1.0, 1.0, (7,), np.float32)
         self._twist_scale = np.repeat([self.ctrl_cfg.max_linear_speed, self.ctrl_cfg.max_angular_speed], 3)
-        self._obs_sizes = {**_OBS_SIZES, **(TASK_OBS_SIZES if self.task_obs else {})}
+        self._n_joints = n = len(self.robot_cfg.joints)
+        self._obs_sizes = {"joint_pos": n, "joint_vel": n, **_OBS_SIZES, **(TASK_OBS_SIZES if self.task_obs else {})}
         self._obs_slices = _slices(self._obs_sizes)
         obs = {k: spaces.Box(-np.inf, np.inf, (n,), np.float64) for k, n in self._obs_sizes.items()}
         if self.image_obs is not None:
@@ -303,7 +304,7 @@ class SMS3DPickEnv(gym.Env):
         q_start, self._start_label = (self.home_q, "home") if self.start is None else self.start.configuration(
             self.np_random, self.reach, self.home_q, estimate.cap_top, estimate.stem_axis)
         d.qpos[w.arm_qadr] = q_start
-        d.ctrl[:6] = q_start
+        d.ctrl[:self._n_joints] = q_start  # the joints' actuators come first, in the joints' order
         self.picking.tool.reset()
         self.posture.reset(q_start, estimate.cap_top, estimate.stem_axis)
         mujoco.mj_forward(m, d)
@@ -333,7 +334,7 @@ class SMS3DPickEnv(gym.Env):
         picking.begin_step(float(a[6]))  # the tool's command (suction: the valve; hand: fingers)
         self.posture.follow(d.site_xmat[w.tool_site, 2::3])  # the tool's approach axis (its site's +z)
         try:
-            d.ctrl[:6] = self.ik.step(a[:6] * self._twist_scale, d.qpos[w.arm_qadr])
+            d.ctrl[:self._n_joints] = self.ik.step(a[:6] * self._twist_scale, d.qpos[w.arm_qadr])
         except NoSolutionFound:  # e.g. pressed against a joint's limit: hold the last command
             pass
         badqacc = d.warning[_BADQACC]

@@ -5,17 +5,22 @@ The Jaco (and the hand) are loaded from the dm_control wheel (BSD-3, see ``asset
 given gravity compensation and joint position actuators, fitted with a tool, and attached to a
 scene ``MjSpec`` through a frame at the mount pose. Every name in the assembled model carries the
 robot's prefix (``jaco/``, ``gantry/``). Actuators: the six arm joints first, then (hand) the
-three fingers.
+three fingers. ``RobotConfig`` registers itself as ``"jaco"`` (:mod:`sms3d_env.robot_registry`);
+MuJoCo is imported where a robot is built, so that listing the robots' names loads none.
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal, Protocol
+from typing import TYPE_CHECKING, ClassVar, Literal
 
-import mujoco
 import numpy as np
+
+from sms3d_env.robot_registry import RobotSpec, register_robot
+
+if TYPE_CHECKING:
+    import mujoco
 
 PREFIX = "jaco/"
 ARM_JOINTS: tuple[str, ...] = tuple(f"joint_{i}" for i in range(1, 7))
@@ -50,32 +55,6 @@ TOOL_CONTYPE = ROBOT_CONTYPE | 8
 HOME_Q = np.array([0.364, 1.227, 0.811, -0.691, -2.037, 3.415])
 
 
-class RobotSpec(Protocol):
-    """What the world, the controller and the env read of a robot's configuration
-    (``RobotConfig``: the Jaco; ``sms3d_env.gantry.GantryConfig``: the gantry)."""
-
-    name: ClassVar[str]
-    prefix: ClassVar[str]  # of every name the robot adds to the world
-    joints: ClassVar[tuple[str, ...]]  # the six joints the controller drives, actuators in this order
-    mount_pos: tuple[float, float, float]
-    mount_yaw_deg: float
-    mount_roll_deg: float
-    tool: Tool
-    cup_radius: float
-    tube_length: float
-    finger_kp: float
-    finger_force: float
-    finger_damping: float
-    finger_armature: float
-    home_q: tuple[float, ...]
-    approach: str  # one of APPROACHES: how the scripted pickers reach the stand-off point
-
-    def build_spec(self) -> mujoco.MjSpec:
-        """The robot with its tool, actuators and wrist sensor, unprefixed, its base the
-        worldbody's first body."""
-        ...
-
-
 def kinova_dir() -> str:
     """Directory of dm_control's bundled Kinova Jaco assets."""
     import dm_control
@@ -83,6 +62,7 @@ def kinova_dir() -> str:
     return os.path.join(os.path.dirname(dm_control.__file__), "third_party", "kinova")
 
 
+@register_robot("jaco")
 @dataclass(frozen=True)
 class RobotConfig:
     """Where and how the arm is mounted and driven.
@@ -146,8 +126,8 @@ class RobotConfig:
         check_tool_fields(self)
         if self.approach not in APPROACHES:
             raise ValueError(f"{type(self).__name__}.approach must be one of {APPROACHES}, got {self.approach!r}")
-        if len(self.home_q) != 6:
-            raise ValueError(f"{type(self).__name__}.home_q must have 6 entries")
+        if len(self.home_q) != len(self.joints):
+            raise ValueError(f"{type(self).__name__}.home_q must have {len(self.joints)} entries, got {len(self.home_q)}")
         if not (isinstance(self.tool_tilt_deg, (int, float)) and 0.0 <= self.tool_tilt_deg <= 90.0):
             raise ValueError(f"{type(self).__name__}.tool_tilt_deg must be an angle in [0, 90] degrees, "
                              f"got {self.tool_tilt_deg!r}")
@@ -168,6 +148,8 @@ def check_tool_fields(cfg: RobotSpec) -> None:
 def _add_suction_tool(parent: mujoco.MjsBody, cfg: RobotSpec,
                       tool_quat: tuple[float, ...]) -> None:
     """A flange, a tube and a compliant cup along the tool frame's -z (``tool_quat`` on ``parent``)."""
+    import mujoco
+
     tool = parent.add_body(name="tool", quat=list(tool_quat))
     kw = dict(contype=TOOL_CONTYPE, conaffinity=ROBOT_CONAFFINITY)
     tool.add_geom(name="flange", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.03, 0.008, 0],
@@ -190,6 +172,8 @@ def _add_wrist_sensor(spec: mujoco.MjSpec, tool_root: mujoco.MjsBody) -> None:
     """F/T at ``tool_root``'s origin: MuJoCo's force/torque sensors read the interaction of the
     site's body (with everything it carries) and its parent, here the wrist link. Outputs only:
     sensors feed nothing back into the simulation."""
+    import mujoco
+
     tool_root.add_site(name=WRIST_SITE, size=[0.002, 0, 0])
     for name, kind in ((WRIST_FORCE, mujoco.mjtSensor.mjSENS_FORCE),
                        (WRIST_TORQUE, mujoco.mjtSensor.mjSENS_TORQUE)):
@@ -201,6 +185,8 @@ def _add_hand_tool(parent: mujoco.MjsBody, spec: mujoco.MjSpec, cfg: RobotSpec,
     """The Jaco 3-finger hand: palm and fingers collide like the suction tool (soil, mushrooms;
     not the arm), each finger joint on a position actuator over its full range. Its frame is
     placed so that its approach axis is the suction tool's for the same ``tool_quat``."""
+    import mujoco
+
     hand = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_hand.xml"))
     for g in hand.geoms:
         g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
@@ -229,6 +215,8 @@ def _add_hand_tool(parent: mujoco.MjsBody, spec: mujoco.MjSpec, cfg: RobotSpec,
 
 def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
     """The Jaco arm with the chosen tool, gravity compensation and position actuators (no prefix)."""
+    import mujoco
+
     spec = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_arm.xml"))
     for name in ("b_1", "b_2", "b_3", "b_4", "b_5", "b_6"):
         spec.body(name).gravcomp = 1.0
@@ -248,6 +236,8 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
 
 def _tilted(tool_quat: tuple[float, ...], tilt_deg: float) -> tuple[float, ...]:
     """``tool_quat`` turned by ``tilt_deg`` about its own x axis (an angled tool adapter)."""
+    import mujoco
+
     half = np.radians(tilt_deg) / 2
     quat = np.empty(4)
     mujoco.mju_mulQuat(quat, np.asarray(tool_quat, float), np.array([np.cos(half), np.sin(half), 0.0, 0.0]))
@@ -268,6 +258,8 @@ def mount_tool(spec: mujoco.MjSpec, parent: mujoco.MjsBody, cfg: RobotSpec,
 
 def attach_robot(scene: mujoco.MjSpec, cfg: RobotSpec) -> mujoco.MjsFrame:
     """Attach the robot to ``scene`` at its mount pose; names gain the robot's prefix."""
+    import mujoco
+
     arm = cfg.build_spec()
     yaw, roll = np.deg2rad(cfg.mount_yaw_deg), np.deg2rad(cfg.mount_roll_deg)
     quat = np.empty(4)
@@ -280,6 +272,8 @@ def attach_robot(scene: mujoco.MjSpec, cfg: RobotSpec) -> mujoco.MjsFrame:
 
 def arm_only_model(cfg: RobotSpec) -> mujoco.MjModel:
     """The arm alone at its mount pose (used by the IK: 6 DoF instead of the scene's hundreds)."""
+    import mujoco
+
     world = mujoco.MjSpec()
     attach_robot(world, cfg)
     return world.compile()

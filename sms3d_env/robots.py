@@ -1,11 +1,26 @@
-"""The robots by name: ``"gantry"`` (the Cartesian harvester, the default) and ``"jaco"`` (the
-Kinova Jaco hanging above the bed, every link colliding)."""
+"""The robots by name: each robot's module registers its class (``@register_robot``, in the style
+of ManiSkill3's ``@register_agent``), and importing this module imports the built-in ones:
+``"gantry"`` (the Cartesian harvester, the default; :mod:`sms3d_env.gantry`) and ``"jaco"`` (the
+Kinova Jaco hanging above the bed, every link colliding; :mod:`sms3d_env.robot`). How to add one:
+docs/add-a-robot.md. Importing it loads no MuJoCo: building a robot does."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 from sms3d_env.gantry import GantryConfig
-from sms3d_env.robot import RobotConfig, RobotSpec
-from sms3d_env.robot_names import ROBOTS
+from sms3d_env.robot import RobotConfig
+from sms3d_env.robot_registry import (
+    RobotSpec,
+    check_robot,
+    register_robot,
+    registered_robots,
+    robot_class,
+)
+
+__all__ = ["GantryConfig", "HANGING_JACO", "ROBOTS", "RobotSpec", "make_robot", "register_robot",
+           "registered_robots"]
 
 #: The Jaco (``RobotConfig()``'s defaults): hanging upside down 0.7 m above the soil, 0.25 m from
 #: the patch centre, with a right-angle suction adapter (``tool_tilt_deg=90``). ASSUMPTIONS chosen
@@ -22,15 +37,32 @@ from sms3d_env.robot_names import ROBOTS
 HANGING_JACO = RobotConfig()
 
 
+class RegisteredNames(Sequence[str]):
+    """The registered robots' names, read from the registry on every use (so a robot registered
+    later is among them): ``"jaco" in ROBOTS``, ``choices=ROBOTS``, ``list(ROBOTS)``."""
+
+    def __getitem__(self, index: Any) -> Any:
+        return registered_robots()[index]
+
+    def __len__(self) -> int:
+        return len(registered_robots())
+
+    def __eq__(self, other: object) -> bool:
+        return tuple(self) == (tuple(other) if isinstance(other, Sequence) and not isinstance(other, str) else other)
+
+    def __repr__(self) -> str:
+        return repr(registered_robots())
+
+
+#: The registered robots' names, sorted (the built-in: gantry, jaco).
+ROBOTS = RegisteredNames()
+
+
 def make_robot(robot: str | RobotSpec) -> RobotSpec:
-    """``robot`` as a configuration: a name in ``ROBOTS``, or a configuration as it is
-    (``ValueError`` naming the argument and the choices)."""
-    if not isinstance(robot, str):
-        if not isinstance(robot, (RobotConfig, GantryConfig)):
-            raise ValueError(f"robot must be one of {ROBOTS} or a RobotConfig / GantryConfig, got {robot!r}")
-        return robot
-    if robot == "gantry":
-        return GantryConfig()
-    if robot == "jaco":
-        return HANGING_JACO
-    raise ValueError(f"robot must be one of {ROBOTS}, got {robot!r}")
+    """``robot`` as a configuration: a registered name (the registered class built with its
+    defaults), or any object that meets :class:`~sms3d_env.robot_registry.RobotSpec`, as it is.
+    ``ValueError`` for an unknown name (listing the registered ones), ``TypeError`` naming the
+    members an object lacks."""
+    if isinstance(robot, str):
+        return check_robot(robot_class(robot)())
+    return check_robot(robot)

@@ -61,7 +61,7 @@ class World:
         is_root_eq (neq,), geom_mushroom (ngeom,: mushroom id or -1), is_cap, robot_geom (ngeom,).
         cup_geom, cup_body: suction cup ids (-1 with the hand).
         tool_site, terrain_geom: site and geom ids.
-        arm_qadr, arm_dadr (6,): the arm joints' qpos / dof addresses.
+        arm_qadr, arm_dadr (n,): the robot joints' qpos / dof addresses (``robot.joints``' order).
         wrench_adr (6,): sensordata addresses of the wrist force (3, N) and torque (3, N m).
         cap_radius (n,): m.
         free_aff, lifted_aff: conaffinity of detached mushrooms before and after they clear the

@@ -158,14 +158,15 @@ def summarise(rows: Sequence[dict[str, Any]], command: str = "", perception: dic
 
 
 def base_slice(rows: Sequence[dict[str, Any]]) -> RowAxes:
-    """The axes of the 1-D report: the noisy-source rows' first robot in ``ROBOTS``' order (rows of
-    a sweep's part files come sorted by name), their first tool and bed size in row order, the
-    smallest position error."""
-    from sms3d_env.robot_names import ROBOTS
+    """The axes of the 1-D report: the noisy-source rows' first robot in the registered robots' order
+    (``registered_robots()``, sorted; rows of a sweep's part files come sorted by name), their
+    first tool and bed size in row order, the smallest position error."""
+    from sms3d_env.robots import registered_robots
 
     noisy = [axes(r) for r in rows if r.get("source", "noisy") == "noisy"] or [axes(r) for r in rows]
     # min() keeps the first of equal keys: panels of one robot stay in row order.
-    panel = min(dict.fromkeys(a.panel for a in noisy), key=lambda p: ROBOTS.index(p[0]) if p[0] in ROBOTS else len(ROBOTS))
+    robots = registered_robots()
+    panel = min(dict.fromkeys(a.panel for a in noisy), key=lambda p: robots.index(p[0]) if p[0] in robots else len(robots))
     return RowAxes(*panel, min(a.position_error_mm for a in noisy if a.panel == panel))
 
 

@@ -55,7 +55,7 @@ class SweepConfig:
     position_errors_mm: tuple[float, ...] = (0.0,)  # exact cap-top offsets of the noisy source
     position_along_axis: bool = False  # offsets along the estimated axis instead of across it
     tools: tuple[str, ...] = ("suction",)
-    robots: tuple[str, ...] = ("gantry",)  # SMS3DPick-v1's robots (sms3d_env.robots.ROBOTS)
+    robots: tuple[str, ...] = ("gantry",)  # registered robots' names (sms3d_env.robots.registered_robots)
     variants: tuple[str, ...] = ("default",)
     perception_episodes: int = 0  # episodes with the perception pose source (default physics)
     perception_detector: str = "shipped"  # stage 1 of the perception episodes: "shipped", "oracle" or a path
@@ -85,10 +85,11 @@ class SweepConfig:
 
         if not self.tools or any(t not in TOOLS for t in self.tools):
             raise ConfigError("tools", f"must be among {TOOLS}, got {self.tools!r}")
-        from sms3d_env.robot_names import ROBOTS
+        from sms3d_env.robots import registered_robots
 
-        if not self.robots or any(r not in ROBOTS for r in self.robots) or len(set(self.robots)) < len(self.robots):
-            raise ConfigError("robots", f"must be distinct names among {ROBOTS}, got {self.robots!r}")
+        robots = registered_robots()
+        if not self.robots or any(r not in robots for r in self.robots) or len(set(self.robots)) < len(self.robots):
+            raise ConfigError("robots", f"must be distinct names among {robots}, got {self.robots!r}")
         if not sizes or any(isinstance(n, bool) or not isinstance(n, int) for n in sizes):
             raise ConfigError("placement.num_mushrooms", f"must be integers, got {self.num_mushrooms!r}")
         for name, least in (("episodes", 1), ("chunk", 1), ("perception_episodes", 0), ("seed", 0)):
@@ -524,7 +525,7 @@ SWEEP_FLAGS = {"errors_deg": "--errors", "episodes": "--episodes", "chunk": "--c
 
 def register(subparsers: Any) -> None:
     """Add ``sms3d sweep``."""
-    from sms3d_env.robot_names import ROBOTS
+    from sms3d_env.robots import registered_robots
 
     p = subparsers.add_parser("sweep", help="pick success of a picker against orientation and position error")
     p.add_argument("--out", required=True, help="output folder (resumes if it holds earlier parts)")
@@ -541,8 +542,8 @@ def register(subparsers: Any) -> None:
                    help="offset the cap top along the estimated axis instead of across it")
     p.add_argument("--tool", nargs="+", default=["suction"], choices=["suction", "hand"],
                    help="tools to sweep (the scripted picker for each)")
-    p.add_argument("--robot", nargs="+", default=list(SweepConfig.robots), choices=ROBOTS,
-                   help="robots to sweep (SMS3DPick-v1's; several make the robot an axis: a robot column in "
+    p.add_argument("--robot", nargs="+", default=list(SweepConfig.robots), choices=registered_robots(),
+                   help="robots to sweep (registered names; several make the robot an axis: a robot column in "
                         "sweep.csv, a curve and a map per robot)")
     p.add_argument("--backend", choices=BACKENDS, default="process",
                    help="process pool (default) or Ray (same rows)")

@@ -51,7 +51,7 @@ def make_world(bed, upright) -> Callable[..., World]:
     def make(robot: RobotSpec, target: int = upright, free_radius: float | None = None) -> World:
         world = build_world(bed, target, robot, free_radius, timestep, models, (robot, target, free_radius))
         world.data.qpos[world.arm_qadr] = robot.home_q
-        world.data.ctrl[:6] = robot.home_q
+        world.data.ctrl[:len(robot.joints)] = robot.home_q
         mujoco.mj_forward(world.model, world.data)
         return world
 
