@@ -1,11 +1,11 @@
 """Target selection and reachability.
 
-Rules (``TargetRule``, the env's ``target`` argument): ``"tallest"`` (highest cap top among
-reachable mushrooms, the default: the cup meets it before any neighbour), ``"largest"`` (cap
-diameter), ``"index"`` (``TargetRule.index``), ``"random"``; drawn uniformly within a class of
-the study (:data:`CLASS_RULES`): ``"harvest_ready"`` (a cap at or above the harvest size, what a
-farm picks now), ``"isolated"``, ``"crowded"``, ``"approach_blocked"`` (harvest-ready ones by
-their neighbours) and ``"small"`` (below the harvest size).
+Rules (``TargetRule``, the env's ``target`` argument): drawn uniformly within a class of the
+study (:data:`CLASS_RULES`): ``"harvest_ready"`` (the default: a cap at or above the harvest
+size, what a farm picks now), ``"isolated"``, ``"crowded"``, ``"approach_blocked"`` (harvest-ready
+ones by their neighbours) and ``"small"`` (below the harvest size); or ``"tallest"`` (highest cap
+top among reachable mushrooms, v1's default: the cup meets it before any neighbour),
+``"largest"`` (cap diameter), ``"index"`` (``TargetRule.index``), ``"random"``.
 Reachability: inverse kinematics (bounded least squares on the arm-only model) reaches a
 pre-grasp pose above the cap top along the stem axis and the grasp pose itself.
 """
@@ -24,6 +24,8 @@ from sms3d_env.records import check_choice, check_int, check_number
 #: Rules that draw the target uniformly among the mushrooms of one class (``target_classes``).
 CLASS_RULES = ("harvest_ready", "isolated", "crowded", "approach_blocked", "small")
 RULES = ("tallest", "largest", "index", "random", *CLASS_RULES)
+#: The rules a study can sweep: every rule but ``"index"``, which names one mushroom of one bed.
+SWEPT_RULES = tuple(r for r in RULES if r != "index")
 #: Farms harvest Agaricus at caps of about 50-60 mm (docs/physics.md, harvest size): the
 #: smallest cap picked now (m).
 HARVEST_DIAMETER = 0.050

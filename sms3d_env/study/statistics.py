@@ -38,12 +38,13 @@ class RowAxes(NamedTuple):
     robot: str
     tool: str
     num_mushrooms: int
+    target: str  # the env's target rule (sms3d_env.targets.TargetRule.rule)
     position_error_mm: float
 
     @property
-    def panel(self) -> tuple[str, str, int]:
-        """(robot, tool, bed size): the rows that share one 1-D curve and one 2-D map."""
-        return self.robot, self.tool, self.num_mushrooms
+    def panel(self) -> tuple[str, str, int, str]:
+        """(robot, tool, bed size, target rule): the rows that share one 1-D curve and one 2-D map."""
+        return self.robot, self.tool, self.num_mushrooms, self.target
 
 
 #: The robot of rows recorded before the robot was an axis (they were made on the Jaco of the
@@ -51,11 +52,17 @@ class RowAxes(NamedTuple):
 UNRECORDED_ROBOT = "jaco-v0"
 
 
+#: The target rule of rows recorded before it was an axis: the default rule of the env they were
+#: made on (harvest-ready on SMS3DPick-v2, the tallest mushroom on v1).
+UNRECORDED_TARGET = "env default"
+
+
 def axes(row: dict[str, Any]) -> RowAxes:
-    """A row's robot, tool, bed size and cap-top position error (mm); rows of earlier sweeps
-    hold only some of them (``UNRECORDED_ROBOT``, suction, 25 mushrooms, 0 mm)."""
+    """A row's robot, tool, bed size, target rule and cap-top position error (mm); rows of
+    earlier sweeps hold only some of them (``UNRECORDED_ROBOT``, suction, 25 mushrooms,
+    ``UNRECORDED_TARGET``, 0 mm)."""
     return RowAxes(row.get("robot", UNRECORDED_ROBOT), row.get("tool", "suction"), int(row.get("num_mushrooms", 25)),
-                   float(row.get("position_error_mm", 0.0)))
+                   row.get("target_rule", UNRECORDED_TARGET), float(row.get("position_error_mm", 0.0)))
 
 
 def mcnemar_p(a: Sequence[bool], b: Sequence[bool]) -> float:

@@ -25,6 +25,7 @@ from sms3d_env.study.figures import (
 )
 from sms3d_env.study.statistics import (
     TILTED_DEG,
+    UNRECORDED_TARGET,
     WITHIN_PP,
     axes,
     crowded_threshold,
@@ -195,53 +196,63 @@ def plot_slices(rows: Sequence[dict[str, Any]], path: str | Path) -> None:
         table = [t for t in success_table(group) if t["variant"] == "default" and t["position_error_mm"] == 0.0]
         if table:
             tables[key] = table
-    robots = list(dict.fromkeys(robot for robot, _, _ in tables))
-    if len({(tool, size) for _, tool, size in tables}) <= 1:
+    robots = list(dict.fromkeys(robot for robot, *_ in tables))
+    if len({key[1:] for key in tables}) <= 1:
         plot_curves({panel_label(key): table for key, table in tables.items()}, path,
                     "Success vs orientation error per robot")
         return
-    sizes = sorted({size for _, _, size in tables})
-    tools = sorted({tool for _, tool, _ in tables})
-    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(sizes)))
+    beds = sorted({(size, target) for _, _, size, target in tables})  # a colour per bed size and target rule
+    tools = sorted({tool for _, tool, _, _ in tables})
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(beds)))
     fig, axs = plt.subplots(1, len(robots), figsize=(5.5 * len(robots), 5), sharey=True, squeeze=False)
     # Curves that coincide (every suction cell at 100 %) stay visible: each is nudged sideways by
     # a fraction of the error spacing.
     errors = sorted({t["error_deg"] for table in tables.values() for t in table})
     spacing = min(np.diff(errors)) if len(errors) > 1 else 1.0
     for ax, robot in zip(axs[0], robots):
-        for (r, tool, size), table in tables.items():
+        for (r, tool, size, target), table in tables.items():
             if r != robot:
                 continue
-            k = tools.index(tool) * len(sizes) + sizes.index(size)
-            nudged = [{**t, "error_deg": t["error_deg"] + spacing * 0.03 * (k - len(tools) * len(sizes) / 2)}
+            bed = beds.index((size, target))
+            k = tools.index(tool) * len(beds) + bed
+            nudged = [{**t, "error_deg": t["error_deg"] + spacing * 0.03 * (k - len(tools) * len(beds) / 2)}
                       for t in table]
-            draw_curve(ax, nudged, f"{tool}, {size} mushrooms", color=colours[sizes.index(size)],
+            draw_curve(ax, nudged, f"{tool}, {size} mushrooms{target_words(target)}", color=colours[bed],
                        ls=TOOL_LINE_STYLES[tools.index(tool) % len(TOOL_LINE_STYLES)],
                        marker=TOOL_MARKERS[tools.index(tool) % len(TOOL_MARKERS)])
         success_axes(ax)
         ax.set_title(robot)
         ax.legend(fontsize=8, loc="lower left")
-    fig.suptitle("Success vs orientation error per tool and bed size (exact cap top, 95 % intervals)")
+    fig.suptitle("Success vs orientation error per tool, bed size and target (exact cap top, 95 % intervals)")
     fig.tight_layout()
     save_figure(fig, path)
 
 
-def panels(rows: Sequence[dict[str, Any]]) -> dict[tuple[str, str, int], list[dict[str, Any]]]:
-    """The rows grouped by (robot, tool, bed size), in sorted order."""
-    groups: dict[tuple[str, str, int], list[dict[str, Any]]] = {}
+Panel = tuple[str, str, int, str]  # robot, tool, bed size, target rule (statistics.RowAxes.panel)
+
+
+def panels(rows: Sequence[dict[str, Any]]) -> dict[Panel, list[dict[str, Any]]]:
+    """The rows grouped by (robot, tool, bed size, target rule), in sorted order."""
+    groups: dict[Panel, list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault(axes(r).panel, []).append(r)
     return dict(sorted(groups.items()))
 
 
-def panel_label(key: tuple[str, str, int]) -> str:
-    robot, tool, size = key
-    return f"{robot}, {tool}, {size} mushrooms"
+def target_words(target: str) -> str:
+    """The target rule as a label's tail (``", crowded targets"``); nothing for rows that did not
+    record it (``UNRECORDED_TARGET``)."""
+    return "" if target == UNRECORDED_TARGET else f", {target.replace('_', '-')} targets"
 
 
-def panel_slug(key: tuple[str, str, int]) -> str:
-    robot, tool, size = key
-    return f"{robot}_{tool}_n{size}"
+def panel_label(key: Panel) -> str:
+    robot, tool, size, target = key
+    return f"{robot}, {tool}, {size} mushrooms{target_words(target)}"
+
+
+def panel_slug(key: Panel) -> str:
+    robot, tool, size, target = key
+    return f"{robot}_{tool}_n{size}" + ("" if target in (UNRECORDED_TARGET, "harvest_ready") else f"_{target}")
 
 
 def region_summary(rows: Sequence[dict[str, Any]], panel: str = "") -> str:
@@ -278,17 +289,18 @@ def region_summary(rows: Sequence[dict[str, Any]], panel: str = "") -> str:
 
 
 def slices_summary(rows: Sequence[dict[str, Any]]) -> str:
-    """Markdown: success per orientation error for every (robot, tool, bed size), no position error."""
-    lines = ["", "## Slices per robot, tool and bed size (no position error, default physics)", "",
-             "| robot | tool | mushrooms | " + " | ".join(f"{e:g}°" for e in sorted({r['error_deg'] for r in rows
+    """Markdown: success per orientation error for every (robot, tool, bed size, target rule), no
+    position error."""
+    lines = ["", "## Slices per robot, tool, bed size and target (no position error, default physics)", "",
+             "| robot | tool | mushrooms | targets | " + " | ".join(f"{e:g}°" for e in sorted({r['error_deg'] for r in rows
                                                                               if r.get('source', 'noisy') == 'noisy'})) + " |"]
     errors = sorted({r["error_deg"] for r in rows if r.get("source", "noisy") == "noisy"})
-    lines.append("| --- | --- | --- |" + " --- |" * len(errors))
-    for (robot, tool, size), group in panels(rows).items():
+    lines.append("| --- | --- | --- | --- |" + " --- |" * len(errors))
+    for (robot, tool, size, target), group in panels(rows).items():
         table = {t["error_deg"]: t for t in success_table(group)
                  if t["variant"] == "default" and t["position_error_mm"] == 0.0}
         cells = [f"{100 * table[e]['success']:.1f} % (n {table[e]['n']})" if e in table else "–" for e in errors]
-        lines.append(f"| {robot} | {tool} | {size} | " + " | ".join(cells) + " |")
+        lines.append(f"| {robot} | {tool} | {size} | {target.replace('_', '-')} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -296,13 +308,14 @@ def cycle_time_summary(rows: Sequence[dict[str, Any]]) -> str:
     """Markdown: the cycle time (reset to lift, simulated) of the successful picks per robot,
     tool and bed size, at each orientation error (default physics, no position error)."""
     lines = ["", "## Cycle time of successful picks (simulated s from reset to lift: median / 90th percentile)", "",
-             "| robot | tool | mushrooms | error | median | p90 | picks |", "| --- | --- | --- | --- | --- | --- | --- |"]
-    for (robot, tool, size), group in panels(rows).items():
+             "| robot | tool | mushrooms | targets | error | median | p90 | picks |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for (robot, tool, size, target), group in panels(rows).items():
         base = [r for r in group if r.get("source", "noisy") == "noisy" and r["variant"] == "default"
                 and axes(r).position_error_mm == 0.0]
         for error in sorted({r["error_deg"] for r in base}):
             median, p90, n = cycle_time([r for r in base if r["error_deg"] == error])
             if n:
-                lines.append(f"| {robot} | {tool} | {size} | {error:g}° | {median:.2f} | {p90:.2f} | {n} |")
+                lines.append(f"| {robot} | {tool} | {size} | {target.replace('_', '-')} | {error:g}° | {median:.2f} | {p90:.2f} | {n} |")
     return "\n".join(lines) + "\n" if len(lines) > 4 else ""
 

@@ -56,6 +56,7 @@ class SweepConfig:
     position_along_axis: bool = False  # offsets along the estimated axis instead of across it
     tools: tuple[str, ...] = ("suction",)
     robots: tuple[str, ...] = ("gantry",)  # registered robots' names (sms3d_env.robots.registered_robots)
+    targets: tuple[str, ...] = ("harvest_ready",)  # target rules (sms3d_env.targets: the study's classes)
     variants: tuple[str, ...] = ("default",)
     perception_episodes: int = 0  # episodes with the perception pose source (default physics)
     perception_detector: str = "shipped"  # stage 1 of the perception episodes: "shipped", "oracle" or a path
@@ -78,6 +79,7 @@ class SweepConfig:
         object.__setattr__(self, "position_errors_mm", tuple(float(e) for e in self.position_errors_mm))
         object.__setattr__(self, "tools", tuple(self.tools))
         object.__setattr__(self, "robots", tuple(self.robots))
+        object.__setattr__(self, "targets", tuple(self.targets))
         if not self.position_errors_mm or any(not math.isfinite(e) or not 0 <= e <= 100
                                               for e in self.position_errors_mm):
             raise ConfigError("position_errors_mm", f"must be distances in [0, 100] mm, got {self.position_errors_mm!r}")
@@ -90,6 +92,11 @@ class SweepConfig:
         robots = registered_robots()
         if not self.robots or any(r not in robots for r in self.robots) or len(set(self.robots)) < len(self.robots):
             raise ConfigError("robots", f"must be distinct names among {robots}, got {self.robots!r}")
+        from sms3d_env.targets import SWEPT_RULES
+
+        if not self.targets or any(t not in SWEPT_RULES for t in self.targets) or \
+                len(set(self.targets)) < len(self.targets):
+            raise ConfigError("targets", f"must be distinct target rules among {SWEPT_RULES}, got {self.targets!r}")
         if not sizes or any(isinstance(n, bool) or not isinstance(n, int) for n in sizes):
             raise ConfigError("placement.num_mushrooms", f"must be integers, got {self.num_mushrooms!r}")
         for name, least in (("episodes", 1), ("chunk", 1), ("perception_episodes", 0), ("seed", 0)):
@@ -119,6 +126,7 @@ class Task:
     tool: str = "suction"
     num_mushrooms: int = 25
     robot: str = "gantry"
+    target: str = "harvest_ready"
 
     @property
     def name(self) -> str:
@@ -128,7 +136,8 @@ class Task:
         extra = (f"_p{self.position_error_mm:g}mm" if self.position_error_mm else "") + \
             (f"_{self.tool}" if self.tool != "suction" else "") + \
             (f"_n{self.num_mushrooms}" if self.num_mushrooms != 25 else "") + \
-            (f"_{self.robot}" if self.robot != "gantry" else "")
+            (f"_{self.robot}" if self.robot != "gantry" else "") + \
+            (f"_t{self.target}" if self.target != "harvest_ready" else "")
         return f"{self.variant}_{error}{extra}_s{self.episode_seeds[0]}-{self.episode_seeds[-1]}"
 
 
@@ -139,12 +148,13 @@ def _chunks(first: int, count: int, size: int) -> list[tuple[int, ...]]:
 
 def plan_tasks(config: SweepConfig) -> list[Task]:
     chunks = _chunks(config.seed, config.episodes, config.chunk)
-    tasks = [Task(v, e, c, "noisy", p, tool, n, robot) for robot in config.robots for tool in config.tools
-             for n in config.num_mushrooms for v in config.variants for p in config.position_errors_mm
-             for e in config.errors_deg for c in chunks]
+    tasks = [Task(v, e, c, "noisy", p, tool, n, robot, target) for robot in config.robots for tool in config.tools
+             for n in config.num_mushrooms for target in config.targets for v in config.variants
+             for p in config.position_errors_mm for e in config.errors_deg for c in chunks]
     perception = _chunks(config.seed, config.perception_episodes, config.chunk)
-    return tasks + [Task("default", math.nan, c, "perception", 0.0, tool, n, robot) for robot in config.robots
-                    for tool in config.tools for n in config.num_mushrooms for c in perception]
+    return tasks + [Task("default", math.nan, c, "perception", 0.0, tool, n, robot, target) for robot in config.robots
+                    for tool in config.tools for n in config.num_mushrooms for target in config.targets
+                    for c in perception]
 
 
 def target_features(scene: Any, target: int) -> dict[str, float]:
@@ -174,7 +184,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
     tool = {} if task.tool == "suction" else {"tool": task.tool}  # the picker's env may fix it
     env, picker = make_picker_env(
         spec, scene={"placement": {"num_mushrooms": task.num_mushrooms}},  # the env's own placement
-        pose_source=source, physics=physics, robot=task.robot, **tool, **config.env_kwargs,
+        pose_source=source, physics=physics, robot=task.robot, target=task.target, **tool, **config.env_kwargs,
     )
     rows = []
     try:
@@ -187,6 +197,7 @@ def run_task(task: Task, config: SweepConfig) -> list[dict[str, Any]]:
                 "variant": task.variant, "picker": spec.label, "source": task.source,
                 "error_deg": task.error_deg, "position_error_mm": task.position_error_mm,
                 "robot": task.robot, "tool": task.tool, "num_mushrooms": task.num_mushrooms,
+                "target_rule": task.target,
                 "axis_error_deg": axis_error, "cap_top_error_mm": cap_top_error, **result,
                 **target_features(env.unwrapped.scene, result["target"]),
             })
@@ -375,6 +386,7 @@ def _cmd_sweep(args: Any) -> int:
             perception_episodes=args.perception_episodes, perception_detector=args.perception_detector,
             perception_realism=args.perception_realism, picker=args.picker, position_errors_mm=tuple(args.position_errors_mm),
             position_along_axis=args.position_along_axis, tools=tuple(args.tool), robots=tuple(args.robot),
+            targets=tuple(args.target),
             env_kwargs={} if args.posture_target == "estimate" else {"controller": {"posture_target": args.posture_target}},
         )
     except ConfigError as exc:
@@ -460,8 +472,9 @@ def _design(rows: list[dict[str, Any]]) -> dict[str, str]:
     """What must be the same in two sweeps' ``compared_rows`` for their episodes to pair."""
     from sms3d_env.study.statistics import axes
 
-    robot, tool, size, position = axes(rows[0])
-    return {"robot": robot, "tool": tool, "bed size": f"{size} mushrooms", "position error": f"{position:g} mm",
+    robot, tool, size, target, position = axes(rows[0])
+    return {"robot": robot, "tool": tool, "bed size": f"{size} mushrooms", "target": target,
+            "position error": f"{position:g} mm",
             "errors": ", ".join(f"{e:g}°" for e in sorted({r["error_deg"] for r in rows})),
             "seeds": _spans(sorted({int(r["seed"]) for r in rows})),
             "episodes": f"{len(rows)} (error, seed) pairs"}
@@ -518,7 +531,7 @@ def picker_comparison(curves: dict[str, list[dict[str, Any]]]) -> str:
 
 # The flag that sets each field SweepConfig checks, to report a refused value by what was typed.
 SWEEP_FLAGS = {"errors_deg": "--errors", "episodes": "--episodes", "chunk": "--chunk", "seed": "--seed",
-               "position_errors_mm": "--position-errors-mm", "tools": "--tool", "robots": "--robot",
+               "position_errors_mm": "--position-errors-mm", "tools": "--tool", "robots": "--robot", "targets": "--target",
                "perception_episodes": "--perception-episodes", "variants": "--variants",
                "placement.num_mushrooms": "--num-mushrooms", "picker": "--picker"}
 
@@ -545,6 +558,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--robot", nargs="+", default=list(SweepConfig.robots), choices=registered_robots(),
                    help="robots to sweep (registered names; several make the robot an axis: a robot column in "
                         "sweep.csv, a curve and a map per robot)")
+    from sms3d_env.targets import SWEPT_RULES
+
+    p.add_argument("--target", nargs="+", default=list(SweepConfig.targets), choices=SWEPT_RULES,
+                   help="target rules (which mushroom each episode picks: harvest_ready, the env's default, or "
+                        "a class of the study); several make the target an axis, a curve and a map per rule")
     p.add_argument("--backend", choices=BACKENDS, default="process",
                    help="process pool (default) or Ray (same rows)")
     p.add_argument("--variants", nargs="+", default=["default"], choices=sorted(SENSITIVITY_VARIANTS),

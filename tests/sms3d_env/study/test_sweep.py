@@ -204,6 +204,25 @@ def test_robot_is_an_axis_with_a_column_a_curve_and_a_map_per_robot(tmp_path, ca
         run_sweep(config, tmp_path, progress=False)
 
 
+def test_target_rule_is_an_axis_whose_rows_pick_from_their_class(tmp_path, capsys):
+    config = SweepConfig(errors_deg=(0.0,), episodes=2, num_mushrooms=25, targets=("harvest_ready", "small"))
+    rows = run_sweep(config, tmp_path, progress=False)
+    assert sorted(r["target_rule"] for r in rows) == ["harvest_ready"] * 2 + ["small"] * 2
+    # Each row's target is of its class: a small cap is below the harvest size, a ready one at it.
+    from sms3d_env.targets import HARVEST_DIAMETER
+
+    assert all((r["cap_diameter"] < HARVEST_DIAMETER) == (r["target_rule"] == "small") for r in rows)
+    assert {t.name.endswith("_tsmall_s0-1") for t in plan_tasks(config)} == {False, True}
+    summary = write_report(rows, tmp_path)["md"].read_text()
+    assert "| gantry | suction | 25 | small |" in summary and "| gantry | suction | 25 | harvest-ready |" in summary
+    with pytest.raises(ConfigError) as info:
+        SweepConfig(targets=("index",))  # names one mushroom of one bed: nothing to sweep
+    assert info.value.field == "targets"
+    with pytest.raises(SystemExit) as exited:
+        main(["sweep", "--out", str(tmp_path / "bad"), "--target", "ripest"])
+    assert exited.value.code == 2 and "--target: invalid choice: 'ripest'" in capsys.readouterr().err
+
+
 def test_report_draws_when_every_episode_of_an_error_succeeds(tmp_path):
     # `sms3d sweep --errors 0 --episodes 4 --chunk 4`: 4/4 successes drew a negative error bar.
     paths = write_report(_rows({0.0: 4, 5.0: 3}, n=4), tmp_path)
