@@ -41,6 +41,11 @@ TRAIN_OPTIONS = {"reward_type": "staged", "suction_mode": "latched", "end_on_dea
 #: ``SMS3DPickEnv``'s version history): v1's picking model and the tallest reachable target.
 V1_OPTIONS = {"robot": "gantry", "physics": V1_PHYSICS, "target": "tallest"}
 
+#: The whole-bed harvest (:mod:`sms3d_env.harvest`): one bed per episode, picked mushroom after
+#: mushroom in one world; the env ends its own episodes (stop, or ``HarvestConfig.max_actions``).
+if "SMS3DHarvest-v0" not in registry:
+    register(id="SMS3DHarvest-v0", entry_point="sms3d_env.harvest.env:SMS3DHarvestEnv")
+
 for _id, _kw in (("SMS3DPick-v1", {"reward_type": "dense", **V1_OPTIONS}),
                  ("SMS3DPickTrain-v1", {**TRAIN_OPTIONS, **V1_OPTIONS}),
                  ("SMS3DPick-v2", {}),

@@ -31,7 +31,7 @@ from sms3d_env.controller import ControllerConfig, IKController
 from sms3d_env.env_args import RENDER_MODES, SUCTION_MODES, check_env_args, pose_error_of
 from sms3d_env.physics_params import PickPhysicsParams, physics_for
 from sms3d_env.picking_model import FAILURE_CAUSES, PickingModel
-from sms3d_env.pose_sources import PoseSource, make_pose_source
+from sms3d_env.pose_sources import PoseEstimate, PoseSource, make_pose_source
 from sms3d_env.posture import IKPosture
 from sms3d_env.records import record_of
 from sms3d_env.rewards import RewardConfig, RewardState, compute_reward, reward_terms
@@ -42,7 +42,7 @@ from sms3d_env.start_states import PregraspStart, check_share
 from sms3d_env.targets import Reachability, TargetRule, select_target
 from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
 from sms3d_env.viewer import PassiveViewer
-from sms3d_env.world import PICK_CAMERA, PICK_CAMERA_DISTANCE, World, build_world
+from sms3d_env.world import PICK_CAMERA, PICK_CAMERA_DISTANCE, World, aim_pick_camera, build_world
 
 __all__ = ["FAILURE_CAUSES", "SUCTION_MODES", "SMS3DPickEnv"]
 
@@ -255,6 +255,7 @@ class SMS3DPickEnv(gym.Env):
         self.target_pose = np.zeros(6)  # the estimate in the observation: cap top, stem axis
         self._start_label = "home"  # info["start"] of the episode
         self.done = False  # the episode terminated or was truncated
+        self._end_on_bruise = True  # a bruised cap ends the episode (start_pick may say otherwise)
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._viewer = PassiveViewer(self.control_dt) if render_mode == "human" else None
 
@@ -299,7 +300,7 @@ class SMS3DPickEnv(gym.Env):
                                      self._model_key(slot, target), self.params.mushrooms_collide,
                                      self.params.compliant_root)
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
-        self.done = False
+        self.done, self._end_on_bruise = False, True
         m, d = w.model, w.data
         q_start, self._start_label = (self.home_q, "home") if self.start is None else self.start.configuration(
             self.np_random, self.reach, self.home_q, estimate.cap_top, estimate.stem_axis)
@@ -308,8 +309,7 @@ class SMS3DPickEnv(gym.Env):
         self.picking.tool.reset()
         self.posture.reset(q_start, estimate.cap_top, estimate.stem_axis)
         mujoco.mj_forward(m, d)
-        for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
-            mujoco.mj_step(m, d)
+        self._settle()
         self.picking.settled()
         if self.render_mode == "human":
             self.render()
@@ -348,7 +348,8 @@ class SMS3DPickEnv(gym.Env):
             ep.unstable = True
         picking.after_step()
         info = picking.evaluate(self.control_dt)
-        terminated = (info["target_picked"] or bool(ep.bruised) or (ep.target_detached and ep.grip_lost)
+        terminated = (info["target_picked"] or (self._end_on_bruise and bool(ep.bruised))
+                      or (ep.target_detached and ep.grip_lost)
                       or (self.end_on_dead_end and picking.dead_end())
                       or self.done)
         truncated = ep.unstable
@@ -364,6 +365,75 @@ class SMS3DPickEnv(gym.Env):
         if self.done:
             self._last_transition = (obs, reward, terminated, truncated, dict(info))
         return obs, reward, terminated, truncated, info
+
+    def _settle(self) -> None:
+        """Run the world ``PickPhysicsParams.settle_time`` with the arm holding still (the soft
+        welds take up gravity; after an earlier pick in the same world, what it left moving comes
+        to rest), the live root springs applied as in a control step; no picking rule is
+        judged."""
+        m, d, roots = self.world.model, self.world.data, self.picking.roots
+        for _ in range(max(1, int(round(self.params.settle_time / m.opt.timestep)))):
+            mujoco.mj_step(m, d)
+            if roots is not None and roots.any_active:
+                roots.apply()
+
+    def start_pick(self, target: int, estimate: PoseEstimate, q_start: np.ndarray | None = None,
+                   end_on_bruise: bool = True) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Begin picking mushroom ``target`` in the world as it stands, instead of on a new bed
+        (``reset``): a harvest (:mod:`sms3d_env.harvest`) picks one mushroom after another in
+        one world. ``step`` then runs the pick; its ``info`` and ``time_s`` count from here.
+
+        Nothing of the bed is rebuilt: mushrooms picked, knocked off, moved or bruised stay as
+        they are, and the roots (which still hold, their springs' state) carry over. What starts
+        anew is the pick's own: the picking model's events (bruises, disturbed neighbours,
+        detachments) for ``target``, the tool (nothing held: call it with the grip released),
+        the IK and its posture target for ``estimate`` (the target's estimated pose, in the
+        observation), and the ``pick`` camera, aimed at the target. The arm starts at rest at
+        ``q_start`` (its joints in ``robot.joints``' order; None: where it stands), and the world
+        settles for ``settle_time`` first, as at reset. A target already off its roots counts as
+        detached from the start (a lift picks it). ``end_on_bruise``: a bruised cap ends the pick
+        as at reset; False: it goes on (a harvester's picker cannot see a bruise).
+
+        Nothing is drawn from the env's random generator. RuntimeError before the first reset or
+        with a mushroom held; ValueError for a target not in the bed or a ``q_start`` of the wrong
+        size.
+        """
+        if self.world is None:
+            raise RuntimeError("call reset() before start_pick(): it builds the bed's world")
+        w, previous = self.world, self.picking
+        m, d = w.model, w.data
+        n = len(w.body_ids)
+        if isinstance(target, bool) or not isinstance(target, (int, np.integer)) or not 0 <= target < n:
+            raise ValueError(f"start_pick: target must be a mushroom of the bed, an integer in [0, {n}), got {target!r}")
+        if previous.state.grip >= 0:
+            raise RuntimeError(f"start_pick: the tool still holds mushroom {previous.state.grip}; release it first")
+        target = int(target)
+        q = d.qpos[w.arm_qadr].copy() if q_start is None else np.asarray(q_start, float)
+        if q.shape != (self._n_joints,) or not np.isfinite(q).all():
+            raise ValueError(f"start_pick: q_start must hold {self._n_joints} finite joint values, got {q_start!r}")
+        rule = self.target_rule
+        cap_top = d.site_xpos[w.cap_top_sites[target]].copy()
+        axis = d.xmat[w.body_ids[target]].reshape(3, 3)[:, 2].copy()
+        tilt = np.degrees(np.arccos(np.clip(axis[2], -1.0, 1.0)))
+        reachable = bool(tilt <= rule.max_tilt_deg and self.reach.reachable(cap_top, axis))
+        self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched",
+                                    roots=previous.roots)
+        ep = self.picking.state
+        if w.root_eq[target] >= 0 and not d.eq_active[w.root_eq[target]]:
+            ep.target_detached = True  # knocked off its roots by an earlier pick
+        self.target_pose = np.concatenate([estimate.cap_top, estimate.stem_axis])
+        aim_pick_camera(m, cap_top, self.robot_cfg.mount_pos)
+        d.qpos[w.arm_qadr], d.qvel[w.arm_dadr] = q, 0.0
+        d.ctrl[:self._n_joints] = q
+        self.picking.tool.reset()
+        self.posture.reset(q, estimate.cap_top, estimate.stem_axis)
+        mujoco.mj_forward(m, d)
+        self._settle()
+        self.picking.settled()
+        self.done, self._end_on_bruise, self._start_label = False, bool(end_on_bruise), "current"
+        if self.render_mode == "human":
+            self.render()
+        return self._obs(), {**self.picking.evaluate(self.control_dt), "start": self._start_label}
 
     def _model_key(self, slot: int | None, target: int) -> tuple[int, int | None] | None:
         """The compiled-model cache key of a pool bed: its slot and, where only the mushrooms near

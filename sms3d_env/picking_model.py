@@ -53,17 +53,23 @@ class PickingModel:
         params: the picking model's numbers.
         target, reachable: the target mushroom and whether the IK reached it at reset.
         latched: the suction valve's training option (``Suction``'s ``latched``).
+        roots: the world's compliant roots from an earlier pick in the same world (a harvest's
+            next pick, ``SMS3DPickEnv.start_pick``): which roots still hold and their springs'
+            state belong to the world, not to one pick. None: new ones, every free mushroom
+            rooted as the world was built.
 
     ``tool`` holds the rules of ``world.tool`` (:mod:`sms3d_env.tools`). Call ``tool.reset()``
     before the world settles after reset, then ``settled()`` (it records the starting poses).
     """
 
     def __init__(self, world: World, params: PickPhysicsParams, target: int, reachable: bool,
-                 latched: bool = False) -> None:
+                 latched: bool = False, roots: CompliantRoots | None = None) -> None:
         self.world, self.params = world, params
         self.state = EpisodeState(target=target, reachable=reachable)
         self.tool: Tool = make_tool(world, params, self.state, latched)
-        self.roots = CompliantRoots(world, params) if params.compliant_root else None
+        if roots is None and params.compliant_root:
+            roots = CompliantRoots(world, params)
+        self.roots = roots
         self._qfrc = np.zeros(world.model.nv)
         self._vel6 = np.zeros(6)
         self.init_xpos = np.zeros((len(world.body_ids), 3))
