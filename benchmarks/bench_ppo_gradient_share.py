@@ -27,10 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # runs from a chec
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from sms3d_env.policies.files import ObservationStats  # noqa: E402
+from sms3d_env.policies.loader import observation_stats_path  # noqa: E402
 from sms3d_env.training import TrainConfig  # noqa: E402
-from sms3d_env.training.actor import observation_stats_path  # noqa: E402
 from sms3d_env.training.envs import vec_env  # noqa: E402
-from sms3d_env.training.model_files import ObservationStats  # noqa: E402
 
 
 def _grad_norm(model: torch.nn.Module, loss: torch.Tensor) -> float:

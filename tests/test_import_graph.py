@@ -120,3 +120,24 @@ def test_lower_packages_never_import_higher_ones():
     for module, deps in _graph().items():  # lazy and TYPE_CHECKING imports count here too
         for higher in above.get(module.split(".")[0], ()):
             assert not any(d.split(".")[0] == higher for d in deps), (module, sorted(deps))
+
+
+def _reached(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every module ``start`` imports, directly or through others."""
+    seen, stack = set(), [start]
+    while stack:
+        for dep in graph[stack.pop()] - seen:
+            seen.add(dep)
+            stack.append(dep)
+    return seen
+
+
+def test_the_pickers_and_the_saved_policies_need_nothing_of_training():
+    """The pickers (the policy picker among them) and the saved-policy files they load read apart
+    from training: none of their modules reaches ``sms3d_env.training`` through any chain of
+    imports, lazy ones included; training uses them, never the other way."""
+    graph = _graph()
+    for module in sorted(graph):
+        if module.split(".")[:2] in (["sms3d_env", "pickers"], ["sms3d_env", "policies"]):
+            reached = sorted(m for m in _reached(graph, module) if m.startswith("sms3d_env.training"))
+            assert not reached, (module, reached)

@@ -22,7 +22,7 @@ def test_a_name_loads_its_submodule_once_and_unknown_names_fail() -> None:
         getattr_("Nope")
 
 
-@pytest.mark.parametrize("package", ["generator", "sms3d_env", "sms3d_env.pickers", "sms3d_env.pose_sources",
+@pytest.mark.parametrize("package", ["generator", "sms3d_env", "sms3d_env.pickers", "sms3d_env.policies", "sms3d_env.pose_sources",
                                      "sms3d_env.tools", "sms3d_env.training"])
 def test_packages_export_every_public_name(package: str) -> None:
     module = importlib.import_module(package)
@@ -32,7 +32,7 @@ def test_packages_export_every_public_name(package: str) -> None:
 
 
 def test_importing_the_packages_loads_no_heavy_module() -> None:
-    code = ("import sys, generator, generator.dataset, sms3d_env, sms3d_env.pickers, sms3d_env.training, "
+    code = ("import sys, generator, generator.dataset, sms3d_env, sms3d_env.pickers, sms3d_env.policies, sms3d_env.training, "
             "sms3d_env.study; print(sorted({'mujoco', 'trimesh', 'torch', 'mink'} & set(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"

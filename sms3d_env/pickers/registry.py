@@ -52,7 +52,7 @@ class PickerSpec:
     def model_path(self) -> Path | None:
         """The model a learned picker loads (the shipped one of its kind without a path); None
         for the scripted picker."""
-        from sms3d_env.training.actor import SHIPPED_POLICY
+        from sms3d_env.policies.loader import SHIPPED_POLICY
 
         if self.kind == "scripted":
             return None
@@ -67,7 +67,7 @@ def picker_name(label: str) -> str:
 def parse_picker(text: str) -> PickerSpec:
     """``"scripted"`` or ``"policy[:PATH]"`` (ValueError naming the picker otherwise, and for a
     removed kind why it was removed; a missing model file raises FileNotFoundError)."""
-    from sms3d_env.training.policy_spec import package_env_ids
+    from sms3d_env.policies.spec import package_env_ids
 
     name, _, path = str(text).partition(":")
     kind, at, env_id = name.partition("@")
@@ -89,15 +89,17 @@ def parse_picker(text: str) -> PickerSpec:
 def make_picker_env(spec: PickerSpec, **env_kwargs: Any) -> tuple[Any, Any]:
     """``(env, picker)``: the env the picker was trained on (``env_kwargs`` added) and the picker,
     a callable ``obs -> action``. A learned picker sets torch to one intra-op thread."""
-    from sms3d_env.training.actor import PolicyActor
-    from sms3d_env.training.envs import make_env
-
     if spec.kind == "scripted":
+        import gymnasium as gym
+
+        import sms3d_env  # noqa: F401  (registers the env ids)
         from sms3d_env.pickers.scripted import ScriptedPicker
 
-        env = make_env(SCRIPTED_ENV_ID, **env_kwargs)
+        env = gym.make(SCRIPTED_ENV_ID, **env_kwargs)
         return env, ScriptedPicker.for_env(env)
     import torch
+
+    from sms3d_env.pickers.policy import PolicyActor
 
     # Per-step inference of a small MLP: more intra-op threads only add overhead, and the
     # study's worker processes would oversubscribe the cores (2 workers x 2 threads on 2 cores

@@ -248,7 +248,7 @@ def _picker_digests(config: SweepConfig) -> dict[str, str] | None:
     import hashlib
 
     from sms3d_env.pickers.registry import parse_picker
-    from sms3d_env.training.actor import observation_stats_path, saved_config_path
+    from sms3d_env.policies.loader import observation_stats_path, saved_config_path
 
     model = parse_picker(config.picker).model_path
     if model is None:

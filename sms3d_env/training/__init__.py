@@ -3,7 +3,7 @@
 | concept | module |
 | --- | --- |
 | ``TrainConfig`` (RL settings, saved as ``config.json``), ``env_kwargs`` | :mod:`~sms3d_env.training.config` |
-| the training envs (``make_env``, ``vec_env``, ``normalized``) | :mod:`~sms3d_env.training.envs` |
+| the training envs (``vec_env``, ``normalized``) | :mod:`~sms3d_env.training.envs` |
 | PPO/SAC training (``train_policy``) | :mod:`~sms3d_env.training.rl` |
 | a falling rate that ends by steps or by wall clock (``WallAwareLinearSchedule``) | :mod:`~sms3d_env.training.schedules` |
 | the start-state curriculum that follows home-start success (``pregrasp_annealing``) | :mod:`~sms3d_env.training.curriculum` |
@@ -11,11 +11,7 @@
 | demonstrations as Minari datasets (``record_datasets``, ``labelled_steps``, ``ExpertLabels``) | :mod:`~sms3d_env.training.demonstrations` |
 | ``sms3d record-demos`` | :mod:`~sms3d_env.training.cli_demos` |
 | recipes as data: a shipped recipe or a recipe file as a config (``read_recipe``, ``Recipe``) | :mod:`~sms3d_env.training.recipes` |
-| RL Baselines3 Zoo: the recipe files (``with_recipe``) and the runs it saves (``zoo_run_of``, ``read_vecnormalize``) | :mod:`~sms3d_env.training.zoo` |
-| the shipped policies' features extractor (``NormalizedFlatten``) | :mod:`~sms3d_env.training.policy_features` |
-| a saved policy as a picker (``load_model``, ``PolicyActor``, ``SHIPPED_POLICY``) | :mod:`~sms3d_env.training.actor` |
-| a run's files: atomic model saves, observation statistics without pickles (``ObservationStats``, ``PolicyFileError``) | :mod:`~sms3d_env.training.model_files` |
-| what a model's policy is built from instead of SB3's pickled entries (``PolicySpec``) | :mod:`~sms3d_env.training.policy_spec` |
+| RL Baselines3 Zoo: the recipe files (``with_recipe``) | :mod:`~sms3d_env.training.zoo` |
 | success of a saved policy (``evaluate_policy_success``) | :mod:`~sms3d_env.training.evaluation` |
 | learning curves of runs (``read_curve``, ``sms3d learning-curve``) | :mod:`~sms3d_env.training.learning_curve` |
 | ``sms3d train-policy`` / ``eval-policy`` (``register``, ``main``; ``python -m sms3d_env.training``) | :mod:`~sms3d_env.training.cli` |
@@ -28,13 +24,9 @@ from generator.lazy import lazy_exports
 _EXPORTS = {
     "ALGOS": "config", "ENV_IDS": "config", "POSE_SOURCES": "config",
     "REWARD_TYPES": "config", "TrainConfig": "config", "env_kwargs": "config",
-    "make_env": "envs", "train_policy": "rl", "WallAwareLinearSchedule": "schedules",
+    "train_policy": "rl", "WallAwareLinearSchedule": "schedules",
     "BCConfig": "imitation", "train_bc": "imitation",
     "record_datasets": "demonstrations", "labelled_steps": "demonstrations", "with_recipe": "zoo", "Recipe": "recipes", "read_recipe": "recipes",
-    "NormalizedFlatten": "policy_features",
-    "SHIPPED_POLICY": "actor", "PolicyActor": "actor", "load_model": "actor",
-    "OBS_STATS_FILE": "model_files", "ObservationStats": "model_files", "PolicyFileError": "model_files",
-    "PolicySpec": "policy_spec",
     "evaluate_policy_success": "evaluation", "success_line": "evaluation",
     "read_curve": "learning_curve", "register": "cli", "main": "cli",
 }  # fmt: skip

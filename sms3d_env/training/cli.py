@@ -12,6 +12,8 @@ from generator.errors import ConfigError
 from generator.files import write_atomic
 from generator.run_folder import RunFolderError
 from sms3d_env.episode_video import check_frame_size, claim_video_folder
+from sms3d_env.policies.files import PolicyFileError
+from sms3d_env.policies.spec import package_env_ids
 from sms3d_env.training.config import (
     ALGOS,
     ENV_IDS,
@@ -21,8 +23,6 @@ from sms3d_env.training.config import (
     VEC_ENVS,
 )
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
-from sms3d_env.training.model_files import PolicyFileError
-from sms3d_env.training.policy_spec import package_env_ids
 from sms3d_env.training.recipes import ARTICLES, field_names
 from sms3d_env.training.recipes import KINDS as RECIPE_KINDS
 from sms3d_env.training.rl import InitModelError, train_policy

@@ -58,7 +58,7 @@ def _env_and_expert(args: Any, spec: Any) -> tuple[Any, Any]:
         from sms3d_env.pickers.scripted import ScriptedPicker
 
         return gym.make(args.env_id or RECORD_ENV_IDS[0], **kw), ScriptedPicker.for_env
-    from sms3d_env.training.actor import PolicyActor
+    from sms3d_env.pickers.policy import PolicyActor
 
     actor = PolicyActor(spec.model_path)
     if args.env_id is not None and args.env_id != actor.env_id:

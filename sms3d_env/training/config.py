@@ -7,7 +7,8 @@ import math
 from dataclasses import dataclass, fields
 from typing import Any
 
-ALGOS = ("ppo", "sac")
+from sms3d_env.policies.spec import ALGOS
+
 POSE_SOURCES = ("oracle", "noisy")
 REWARD_TYPES = ("dense", "sparse", "staged")
 #: The ids a policy can be trained on: the base ids (whose ``reward_type`` is an option) and the

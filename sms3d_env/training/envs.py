@@ -1,5 +1,5 @@
-"""The training envs: one pick env (``make_env``), vectorised (``vec_env``) and with
-standardised observations (``normalized``)."""
+"""The training envs: pick envs (:func:`~sms3d_env.policies.envs.make_env`) vectorised
+(``vec_env``) and with standardised observations (``normalized``)."""
 
 from __future__ import annotations
 
@@ -7,19 +7,7 @@ import functools
 from pathlib import Path
 from typing import Any
 
-
-def make_env(env_id: str = "SMS3DPick-v1", flat_observation: bool = False, **kwargs: Any) -> Any:
-    """Module-level factory so that ``SubprocVecEnv`` workers can unpickle it;
-    ``flat_observation`` flattens the dict observation into one vector (gymnasium's
-    ``FlattenObservation``, outermost)."""
-    import gymnasium as gym
-
-    import sms3d_env  # noqa: F401  (registers the env ids)
-
-    env = gym.make(env_id, **kwargs)
-    if flat_observation:
-        env = gym.wrappers.FlattenObservation(env)
-    return env
+from sms3d_env.policies.envs import make_env
 
 
 def vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | None,

@@ -14,7 +14,8 @@ import numpy as np
 
 from generator.errors import ConfigError
 from sms3d_env.episode_video import EpisodeVideo
-from sms3d_env.training.actor import SHIPPED_POLICY, PolicyActor
+from sms3d_env.pickers.policy import PolicyActor
+from sms3d_env.policies.loader import SHIPPED_POLICY
 from sms3d_env.training.config import TRAIN_ENV_IDS, check_bed_size, env_kwargs
 
 

@@ -34,8 +34,8 @@ import numpy as np
 
 from generator.files import write_atomic
 from generator.run_folder import open_run_folder
+from sms3d_env.policies.files import finished_run, run_settings, save_model
 from sms3d_env.training.config import POSTURE_TARGETS, check_bed_size, env_options
-from sms3d_env.training.model_files import finished_run, run_settings, save_model
 
 TRAIN_ENV_ID = "SMS3DPickTrain-v2"
 
@@ -257,7 +257,7 @@ def build_policy_model(env: Any, demos: dict[str, np.ndarray], net_arch: tuple[i
     """A PPO model whose policy standardises observations with the demonstrations' statistics."""
     from stable_baselines3 import PPO
 
-    from sms3d_env.training.policy_features import NormalizedFlatten
+    from sms3d_env.policies.features import NormalizedFlatten
 
     keys = list(env.observation_space.spaces)
     x = flat_observations(demos, keys)

@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from sms3d_env.training.actor import checkpoint_steps
+from sms3d_env.policies.loader import checkpoint_steps
 
 EVAL_COLUMN, STEPS_COLUMN, WALL_COLUMN = "eval/success_rate", "time/total_timesteps", "time/time_elapsed"
 SHARE_COLUMN = "curriculum/pregrasp_start"  # written by --pregrasp-anneal

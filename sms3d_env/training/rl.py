@@ -9,7 +9,7 @@ the flattened observation; ``normalize=True`` standardises observations
 (SB3's ``VecNormalize``; its statistics saved as ``obs_rms.npz`` beside the model, no pickle).
 ``out`` is a run folder (:mod:`generator.run_folder`): a rerun with the same settings resumes
 from the latest complete checkpoint, other settings are refused unless ``overwrite``. Every file
-is written atomically (:mod:`sms3d_env.training.model_files`). The demonstration-started recipe
+is written atomically (:mod:`sms3d_env.policies.files`). The demonstration-started recipe
 lives in :mod:`sms3d_env.training.imitation`.
 """
 
@@ -30,18 +30,7 @@ import numpy as np
 
 from generator.files import write_atomic
 from generator.run_folder import open_run_folder
-from sms3d_env.training.actor import (
-    checkpoint_path,
-    checkpoint_steps,
-    load_sb3,
-    observation_stats_path,
-    read_saved_config,
-    saved_config_path,
-)
-from sms3d_env.training.config import TrainConfig, env_options, removed_experiment_of
-from sms3d_env.training.curriculum import pregrasp_annealing
-from sms3d_env.training.envs import normalized, vec_env
-from sms3d_env.training.model_files import (
+from sms3d_env.policies.files import (
     OBS_STATS_FILE,
     ObservationStats,
     PolicyFileError,
@@ -51,7 +40,18 @@ from sms3d_env.training.model_files import (
     save_model,
     save_replay_buffer,
 )
-from sms3d_env.training.policy_spec import PolicySpec, algorithm_class
+from sms3d_env.policies.loader import (
+    checkpoint_path,
+    checkpoint_steps,
+    load_sb3,
+    observation_stats_path,
+    read_saved_config,
+    saved_config_path,
+)
+from sms3d_env.policies.spec import PolicySpec, algorithm_class
+from sms3d_env.training.config import TrainConfig, env_options, removed_experiment_of
+from sms3d_env.training.curriculum import pregrasp_annealing
+from sms3d_env.training.envs import normalized, vec_env
 from sms3d_env.training.schedules import falling_rate
 
 
@@ -352,7 +352,7 @@ def wall_clock_limit(max_wall_s: float) -> Any:
 def _observation_keys(cfg: TrainConfig) -> list[str]:
     """The observation's keys in the order ``FlattenObservation`` concatenates them (saved so that
     ``PolicyActor`` flattens a dict observation the same way)."""
-    from sms3d_env.training.envs import make_env
+    from sms3d_env.policies.envs import make_env
 
     env = make_env(**{**cfg.env_kwargs(), "flat_observation": False})
     try:

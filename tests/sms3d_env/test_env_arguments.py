@@ -22,13 +22,14 @@ from sms3d_env.controller import ControllerConfig
 from sms3d_env.env_args import translate_legacy_options
 from sms3d_env.physics_params import V1_PHYSICS, PickPhysicsParams
 from sms3d_env.pick_env import SMS3DPickEnv
+from sms3d_env.pickers.policy import PolicyActor
+from sms3d_env.policies.loader import SHIPPED_POLICY
 from sms3d_env.pose_sources import NoisyPose
 from sms3d_env.records import record_of
 from sms3d_env.rewards import RewardConfig
 from sms3d_env.scene_source import SceneSourceConfig, scene_source_config
 from sms3d_env.start_states import PregraspStart
 from sms3d_env.targets import TargetRule
-from sms3d_env.training.actor import SHIPPED_POLICY, PolicyActor
 
 SMALL = generator.SceneConfig().replace(placement__num_mushrooms=6)
 #: SMALL in the mapping form, and the config it gives where mushrooms collide (v2, the class

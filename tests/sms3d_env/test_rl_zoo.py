@@ -15,17 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sms3d_env.training.actor import PolicyActor
+from sms3d_env.pickers.policy import PolicyActor
+from sms3d_env.policies.files import PolicyFileError
+from sms3d_env.policies.zoo_runs import read_vecnormalize
 from sms3d_env.training.config import TrainConfig
-from sms3d_env.training.model_files import PolicyFileError
 from sms3d_env.training.recipes import read_recipe
-from sms3d_env.training.zoo import (
-    RecipeError,
-    read_vecnormalize,
-    read_zoo_yaml,
-    recipe_path,
-    with_recipe,
-)
+from sms3d_env.training.zoo import RecipeError, read_zoo_yaml, recipe_path, with_recipe
 
 ENV_ID = "SMS3DPickTrain-v1"
 BED = 8
@@ -76,7 +71,7 @@ def test_the_restricted_reader_gives_what_sb3_unpickles(zoo_run):
     """The file is this test's own run's: unpickling it with SB3 here is the reference."""
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from sms3d_env.training.envs import make_env
+    from sms3d_env.policies.envs import make_env
 
     run, _ = zoo_run
     path = run / ENV_ID / "vecnormalize.pkl"

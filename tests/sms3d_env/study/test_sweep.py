@@ -416,8 +416,8 @@ def test_sweep_refuses_an_empty_or_file_out(tmp_path, capsys, monkeypatch):
 
 def test_a_resumed_sweep_refuses_a_learned_picker_whose_config_changed(tmp_path, monkeypatch):
     """The picker's ``config.json`` sets the env it acts in: parts made with another are stale."""
+    from sms3d_env.policies.loader import SHIPPED_POLICY
     from sms3d_env.study import sweep
-    from sms3d_env.training.actor import SHIPPED_POLICY
 
     picker = tmp_path / "policy"
     picker.mkdir()

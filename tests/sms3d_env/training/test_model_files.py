@@ -15,15 +15,16 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from sms3d_env.pickers.policy import PolicyActor
 from sms3d_env.pickers.registry import make_picker_env, parse_picker
-from sms3d_env.training import SHIPPED_POLICY, PolicyActor, main
-from sms3d_env.training.actor import load_sb3
-from sms3d_env.training.model_files import ObservationStats, PolicyFileError
+from sms3d_env.policies.files import ObservationStats, PolicyFileError
+from sms3d_env.policies.loader import SHIPPED_POLICY, load_sb3
+from sms3d_env.training import main
 
 SAVE_LOOP = """
 import sys
 from stable_baselines3 import PPO
-from sms3d_env.training.model_files import save_model
+from sms3d_env.policies.files import save_model
 model = PPO("MlpPolicy", "Pendulum-v1", policy_kwargs={"net_arch": [512, 512]}, device="cpu")
 save_model(model, sys.argv[1])
 print("saved", flush=True)

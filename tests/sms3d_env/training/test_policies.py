@@ -10,9 +10,11 @@ import math
 import numpy as np
 import pytest
 
+from sms3d_env.pickers.policy import PolicyActor
 from sms3d_env.pickers.registry import PickerSpec, make_picker_env, parse_picker
+from sms3d_env.policies.loader import SHIPPED_POLICY
 from sms3d_env.study.sweep import SweepConfig, run_sweep
-from sms3d_env.training import SHIPPED_POLICY, PolicyActor, main
+from sms3d_env.training import main
 from sms3d_env.training.imitation import BCConfig, train_bc
 
 

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from generator.run_folder import LOCK_FILE, RunFolderError, lock_run_folder
-from sms3d_env.training import TrainConfig, load_model, main, train_policy
-from sms3d_env.training.actor import checkpoint_steps
+from sms3d_env.policies.loader import checkpoint_steps, load_model
+from sms3d_env.training import TrainConfig, main, train_policy
 
 TINY = dict(algo="ppo", total_steps=64, n_steps=64, batch_size=64, num_mushrooms=8, max_episode_steps=40,
             eval_freq=0, checkpoint_freq=0, verbose=0, net_arch=(32, 32))
@@ -117,7 +117,7 @@ def test_a_resumed_run_without_a_checkpoint_starts_at_step_zero_and_says_so(tmp_
 
 
 def test_a_sac_run_resumes_with_its_replay_buffer_and_observation_statistics(tmp_path, capsys):
-    from sms3d_env.training.model_files import ObservationStats
+    from sms3d_env.policies.files import ObservationStats
 
     out = tmp_path / "run"
     cfg = TrainConfig(out=str(out), **{**TINY, "algo": "sac", "total_steps": 200, "learning_starts": 50,

@@ -19,14 +19,9 @@ import pytest
 import torch
 from stable_baselines3 import PPO, SAC
 
-from sms3d_env.training import (
-    SHIPPED_POLICY,
-    PolicyActor,
-    TrainConfig,
-    train_policy,
-)
-from sms3d_env.training.actor import load_model, load_sb3
-from sms3d_env.training.model_files import (
+from sms3d_env.pickers.policy import PolicyActor
+from sms3d_env.policies.features import NormalizedFlatten
+from sms3d_env.policies.files import (
     POLICY_SPEC_MEMBER,
     PolicyFileError,
     load_replay_buffer,
@@ -34,7 +29,8 @@ from sms3d_env.training.model_files import (
     save_model,
     save_replay_buffer,
 )
-from sms3d_env.training.policy_features import NormalizedFlatten
+from sms3d_env.policies.loader import SHIPPED_POLICY, load_model, load_sb3
+from sms3d_env.training import TrainConfig, train_policy
 from sms3d_env.training.schedules import falling_rate
 
 

@@ -10,14 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from sms3d_env.training import (
-    TrainConfig,
-    evaluate_policy_success,
-    load_model,
-    register,
-    train_policy,
-)
-from sms3d_env.training.model_files import PolicyFileError
+from sms3d_env.policies.files import PolicyFileError
+from sms3d_env.policies.loader import load_model
+from sms3d_env.training import TrainConfig, evaluate_policy_success, register, train_policy
 from sms3d_env.training.rl import InitModelError
 
 FAST = dict(num_mushrooms=8, max_episode_steps=40, eval_freq=128, eval_episodes=1,
@@ -126,7 +121,7 @@ def test_a_kl_limited_tool_posture_run_is_rebuilt_with_its_env_options(tmp_path)
     evaluation of the policy."""
     from stable_baselines3 import PPO
 
-    from sms3d_env.training.actor import PolicyActor
+    from sms3d_env.pickers.policy import PolicyActor
 
     cfg = TrainConfig(algo="ppo", total_steps=128, n_steps=128, batch_size=64, target_kl=0.01,
                       posture_target="tool", learning_rate=1e-4, gamma=0.999, out=str(tmp_path),
@@ -144,7 +139,7 @@ def test_a_run_of_a_removed_experiment_is_refused_saying_why(tmp_path):
     actions corrected the scripted picker's in a removed wrapper) is refused by ``PolicyActor``,
     as ``init_model`` and as a ``TrainConfig``, naming the removal; an older rl run's record of
     removed fields at their defaults still reads."""
-    from sms3d_env.training.actor import PolicyActor
+    from sms3d_env.pickers.policy import PolicyActor
 
     cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v2", total_steps=128, n_steps=128, batch_size=64,
                       out=str(tmp_path / "run"), **{**FAST, "eval_freq": 0, "checkpoint_freq": 0})
@@ -175,9 +170,9 @@ def test_pregrasp_starts_are_for_training_only(tmp_path, monkeypatch):
     """The training envs start a share of their episodes on the way to a pre-grasp pose and draw
     their beds from a pool; the periodic evaluation and every later evaluation of the saved policy
     start at home on fresh beds."""
+    from sms3d_env.pickers.policy import PolicyActor
     from sms3d_env.start_states import PregraspStart
     from sms3d_env.training import rl
-    from sms3d_env.training.actor import PolicyActor
 
     built = []
     real_vec_env = rl.vec_env
@@ -214,7 +209,7 @@ def test_annealing_reaches_the_training_envs_through_their_wrappers(tmp_path):
 def test_the_best_model_is_saved_with_its_observation_statistics(tmp_path):
     """``best/best_model.zip`` loads like the final model: its VecNormalize statistics and the
     run's config.json lie beside it (they were missing, and the statistics drift after the best)."""
-    from sms3d_env.training.actor import PolicyActor
+    from sms3d_env.pickers.policy import PolicyActor
 
     for normalize in (True, False):
         out = tmp_path / str(normalize)
@@ -357,9 +352,10 @@ def test_a_run_starts_from_a_checkpoint_of_another_and_a_checkpoint_evaluates_li
     start; a checkpoint alone is rebuilt with its run's env (config.json one folder up)."""
     import numpy as np
 
-    from sms3d_env.training.actor import PolicyActor, observation_stats_path, saved_config_path
+    from sms3d_env.pickers.policy import PolicyActor
+    from sms3d_env.policies.files import ObservationStats
+    from sms3d_env.policies.loader import observation_stats_path, saved_config_path
     from sms3d_env.training.envs import normalized, vec_env
-    from sms3d_env.training.model_files import ObservationStats
     from sms3d_env.training.rl import InitModelError, _build_model, _start_from
 
     first = tmp_path / "first"
@@ -425,8 +421,9 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
     import gymnasium as gym
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from sms3d_env.training.actor import PolicyActor
-    from sms3d_env.training.envs import make_env, vec_env
+    from sms3d_env.pickers.policy import PolicyActor
+    from sms3d_env.policies.envs import make_env
+    from sms3d_env.training.envs import vec_env
 
     cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v2", n_envs=2, vec_env="dummy", flat_observation=True,
                       normalize=True, total_steps=256, n_steps=64, batch_size=64, out=str(tmp_path),
@@ -457,7 +454,7 @@ def test_a_flat_observation_run_in_the_training_process_acts_on_dict_observation
 
 
 def test_normalised_rewards_are_scaled_by_the_discounted_returns_spread(tmp_path):
-    from sms3d_env.training.model_files import ObservationStats
+    from sms3d_env.policies.files import ObservationStats
 
     cfg = TrainConfig(algo="ppo", env_id="SMS3DPickTrain-v2", n_envs=2, vec_env="dummy", flat_observation=True,
                       normalize=True, normalize_reward=True, total_steps=256, n_steps=64, batch_size=64,

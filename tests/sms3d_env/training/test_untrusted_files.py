@@ -23,11 +23,10 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 from generator.errors import ConfigError
+from sms3d_env.pickers.policy import PolicyActor
 from sms3d_env.pickers.registry import make_picker_env, parse_picker
-from sms3d_env.training import model_files
-from sms3d_env.training.actor import PolicyActor, load_sb3
-from sms3d_env.training.cli import main
-from sms3d_env.training.model_files import (
+from sms3d_env.policies import files as model_files
+from sms3d_env.policies.files import (
     POLICY_SPEC_MEMBER,
     ObservationStats,
     PolicyFileError,
@@ -35,7 +34,10 @@ from sms3d_env.training.model_files import (
     read_policy_spec,
     save_model,
 )
-from sms3d_env.training.zoo import RecipeError, read_run_yaml, read_vecnormalize, read_zoo_yaml
+from sms3d_env.policies.loader import load_sb3
+from sms3d_env.policies.zoo_runs import read_run_yaml, read_vecnormalize
+from sms3d_env.training.cli import main
+from sms3d_env.training.zoo import RecipeError, read_zoo_yaml
 
 ENV_ID = "SMS3DPickTrain-v1"
 #: The newest version of ENV_ID's env: a model with no record of its env runs there.
@@ -328,8 +330,8 @@ def test_a_command_contradicting_the_options_a_policy_was_trained_with_is_refuse
     every row gantry. Options the command repeats as trained pass."""
     import shutil
 
-    from sms3d_env.training.actor import SHIPPED_POLICY
-    from sms3d_env.training.model_files import PolicyFileError
+    from sms3d_env.policies.files import PolicyFileError
+    from sms3d_env.policies.loader import SHIPPED_POLICY
 
     for name in ("model.zip", "config.json"):
         shutil.copy(SHIPPED_POLICY.parent / name, tmp_path / name)
@@ -347,8 +349,8 @@ def test_a_command_contradicting_the_options_a_policy_was_trained_with_is_refuse
 def test_saved_env_options_that_are_no_env_arguments_are_refused_naming_the_file(tmp_path):
     import shutil
 
-    from sms3d_env.training.actor import SHIPPED_POLICY
-    from sms3d_env.training.model_files import PolicyFileError
+    from sms3d_env.policies.files import PolicyFileError
+    from sms3d_env.policies.loader import SHIPPED_POLICY
 
     for name in ("model.zip", "config.json"):
         shutil.copy(SHIPPED_POLICY.parent / name, tmp_path / name)

@@ -1,5 +1,5 @@
-"""The env a saved policy runs in: one of this package's registered ids
-(:func:`~sms3d_env.training.policy_spec.package_env_ids`), as the policy's own record names it (a
+"""The env a saved policy runs in (:func:`make_env`): one of this package's registered ids
+(:func:`~sms3d_env.policies.spec.package_env_ids`), as the policy's own record names it (a
 run's ``config.json``, an RL Zoo run's ``args.yml``, the model zip's ``sms3d_policy.json``), as the
 user gives it (``--env-id``), or else found by matching the model's observation and action spaces
 against those of each registered env (:func:`match_env`).
@@ -15,9 +15,21 @@ from pathlib import Path
 from typing import Any
 
 from generator.errors import ConfigError
-from sms3d_env.training.model_files import PolicyFileError
-from sms3d_env.training.policy_spec import package_env_ids, space_signature
-from sms3d_env.training.quoting import clipped
+from sms3d_env.policies.files import PolicyFileError
+from sms3d_env.policies.quoting import clipped
+from sms3d_env.policies.spec import package_env_ids, space_signature
+
+
+def make_env(env_id: str, flat_observation: bool = False, **kwargs: Any) -> Any:
+    """``gym.make(env_id, **kwargs)`` with this package's ids registered; ``flat_observation``
+    flattens the dict observation into one vector (gymnasium's ``FlattenObservation``,
+    outermost). Module-level, so that ``SubprocVecEnv`` workers can unpickle it."""
+    import gymnasium as gym
+
+    import sms3d_env  # noqa: F401  (registers the env ids)
+
+    env = gym.make(env_id, **kwargs)
+    return gym.wrappers.FlattenObservation(env) if flat_observation else env
 
 
 def checked_env_id(value: Any, path: Path, field: str) -> str:
@@ -46,8 +58,6 @@ def chosen_env_id(given: str | None, recorded: str | None, record: Path | None) 
 def env_spaces(env_id: str, env_options: dict[str, Any] | None = None) -> tuple[Any, Any]:
     """``env_id``'s observation space (a ``Dict``, keys in the order ``FlattenObservation``
     concatenates them) and action space, with ``env_options``."""
-    from sms3d_env.training.envs import make_env
-
     env = make_env(env_id, **(env_options or {}))
     try:
         return env.observation_space, env.action_space
@@ -70,7 +80,7 @@ class EnvMatch:
 def match_env(path: Path, signatures: tuple[Any, Any], candidates: tuple[str, ...]) -> EnvMatch:
     """The one env of ``candidates`` (each made once, with its default options) whose observation
     (as it is, or flattened) and action spaces have a model's ``signatures``
-    (:func:`~sms3d_env.training.policy_spec.space_signature` of both); of several versions of one
+    (:func:`~sms3d_env.policies.spec.space_signature` of both); of several versions of one
     env, the latest. ``PolicyFileError`` naming the model ``path`` and the candidates when none
     do, or several envs."""
     import warnings

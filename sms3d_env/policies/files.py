@@ -8,8 +8,8 @@ the whole object, so loading them unpickled whatever the file held; and SB3's zi
 policy class, spaces and schedules. :func:`save_model` (through
 :func:`generator.files.write_via_temp`) serves every save of a run (final model, best model,
 checkpoints) and adds :data:`POLICY_SPEC_MEMBER` to the zip
-(:class:`~sms3d_env.training.policy_spec.PolicySpec`, read back by
-:func:`~sms3d_env.training.actor.load_sb3`); :class:`ObservationStats` holds ``VecNormalize``'s
+(:class:`~sms3d_env.policies.spec.PolicySpec`, read back by
+:func:`~sms3d_env.policies.loader.load_sb3`); :class:`ObservationStats` holds ``VecNormalize``'s
 running means and variances, and :func:`save_replay_buffer` a replay buffer's arrays, read back
 with ``allow_pickle=False``.
 """
@@ -27,9 +27,8 @@ from typing import Any
 import numpy as np
 
 from generator.files import write_via_temp
-from sms3d_env.training.config import ALGOS
-from sms3d_env.training.policy_spec import PolicySpec, algorithm_class
-from sms3d_env.training.quoting import clipped, described_error
+from sms3d_env.policies.quoting import clipped, described_error
+from sms3d_env.policies.spec import ALGOS, PolicySpec, algorithm_class
 
 #: The most bytes a loader inflates from one member of a model zip: its weights (``.pth``; the
 #: shipped policies' are 0.1 MB, a 2x1024 MLP's with its optimiser state ~50 MB) and any other

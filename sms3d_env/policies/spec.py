@@ -2,11 +2,11 @@
 
 An SB3 ``model.zip`` stores its policy class, observation and action spaces, schedules and any
 class named in ``policy_kwargs`` as cloudpickled entries of its ``data`` JSON; unpickling them
-runs whatever code the file carries. :func:`~sms3d_env.training.actor.load_sb3` unpickles none:
+runs whatever code the file carries. :func:`~sms3d_env.policies.loader.load_sb3` unpickles none:
 it hands SB3 these objects instead, rebuilt from a ``PolicySpec``, which names the algorithm and
 the policy from fixed lists, gives the spaces as numbers, and names the classes of
 ``policy_kwargs`` by qualified name, mapped back through :func:`policy_kwarg_classes` only.
-:func:`~sms3d_env.training.model_files.save_model` writes it into every model zip it saves.
+:func:`~sms3d_env.policies.files.save_model` writes it into every model zip it saves.
 """
 
 from __future__ import annotations
@@ -16,8 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from sms3d_env.training.config import ALGOS
-from sms3d_env.training.quoting import clipped
+from sms3d_env.policies.quoting import clipped
+
+#: The algorithms a saved policy may be of.
+ALGOS = ("ppo", "sac")
 
 #: The SB3 policies a saved model may use (SB3's names, for PPO and for SAC alike): the dict
 #: observation's and the flattened observation's.
@@ -35,11 +37,13 @@ def qualified_name(cls: type) -> str:
 
 def policy_kwarg_classes() -> dict[str, type]:
     """The classes a saved model's ``policy_kwargs`` may name, by qualified name: the ones this
-    package's training passes (the shipped policies' features extractor). Any other name is
-    refused, so loading imports nothing that a file names."""
-    from sms3d_env.training.policy_features import NormalizedFlatten
+    package's training passes (the shipped policies' features extractor, also by the name that
+    models saved before it moved record). Any other name is refused, so loading imports nothing
+    that a file names."""
+    from sms3d_env.policies.features import NormalizedFlatten
 
-    return {qualified_name(c): c for c in (NormalizedFlatten,)}
+    return {qualified_name(NormalizedFlatten): NormalizedFlatten,
+            "sms3d_env.training.policy_features.NormalizedFlatten": NormalizedFlatten}
 
 
 def package_env_ids() -> tuple[str, ...]:
@@ -249,7 +253,7 @@ class PolicySpec:
                    policy_kwargs_to_json(model.policy_kwargs), _trained_env_id(model))
 
     def to_json(self) -> dict[str, Any]:
-        """The spec as JSON data (what :data:`~sms3d_env.training.model_files.POLICY_SPEC_MEMBER` holds)."""
+        """The spec as JSON data (what :data:`~sms3d_env.policies.files.POLICY_SPEC_MEMBER` holds)."""
         if self.policy_kwargs is None:
             raise ValueError("policy_kwargs: a spec written to a file must hold them")
         return {"format": SPEC_FORMAT, "algo": self.algo, "policy": self.policy,
