@@ -42,8 +42,8 @@ class HarvestConfig:
         max_tilt_deg: a candidate whose estimated stem axis leans further from vertical (deg) is
             unreachable (masked), as for the pick env's target rules.
         scan_time: simulated seconds a scan (an overhead image and its processing) takes.
-            ASSUMPTION: 1.0 s, the order of the shipped perception pipeline's compute per bed on
-            two cores (docs/results-perception.md) plus an exposure.
+            ASSUMPTION: 1.0 s: both stages of the shipped perception pipeline took 0.84-0.93 s
+            per bed (docs/results-perception.md), plus an exposure.
         travel_speed: top speed of a timed move above the bed (m/s per axis). ASSUMPTION: 0.5 m/s,
             the gantry's slide speed limit (``ControllerConfig.max_slide_speed``).
         travel_accel: acceleration of a timed move (m/s^2 per axis). ASSUMPTION: 1.0 m/s^2, a
@@ -56,8 +56,10 @@ class HarvestConfig:
             ASSUMPTION: 0.05 m, the first pose of the IK's posture target
             (``posture.POSTURE_OFFSETS``).
         collection_point: (x, y) of the collection point (m, world): a tray beside the bed,
-            within the gantry's rails (+-0.40 m) and outside the 0.7 m terrain patch.
-            ASSUMPTION: (0.38, 0.0).
+            within the gantry's rails (+-0.40 m) and outside the 0.7 m terrain patch; each
+            picked mushroom is carried there, and the next pick starts from there.
+            ASSUMPTION: (0.38, 0.0). None: a tray on the head, so a picked mushroom is dropped
+            where it was picked (``drop_time``, no trip) and the next pick starts from there.
         drop_time: seconds to release a mushroom at the collection point (valve off, the cap
             off the cup). ASSUMPTION: 0.2 s.
         max_pick_steps: control steps one pick may take (the pick env's registered limit, 250:
@@ -78,7 +80,7 @@ class HarvestConfig:
     travel_accel: float = 1.0
     travel_height: float = 0.20
     pick_clearance: float = 0.05
-    collection_point: tuple[float, float] = (0.38, 0.0)
+    collection_point: tuple[float, float] | None = (0.38, 0.0)
     drop_time: float = 0.2
     max_pick_steps: int = 250
     max_actions: int = 200
@@ -99,10 +101,14 @@ class HarvestConfig:
         _number("travel_height", self.travel_height, 0.0, 1.0, "a height in [0, 1] m")
         _number("pick_clearance", self.pick_clearance, 0.0, 0.2, "a distance in [0, 0.2] m")
         point = self.collection_point
-        if (not isinstance(point, (tuple, list)) or len(point) != 2
+        if point is None:
+            pass
+        elif (not isinstance(point, (tuple, list)) or len(point) != 2
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
                            for v in point)):
-            raise ConfigError("HarvestConfig.collection_point", f"must be two finite numbers (x, y) in m, got {point!r}")
-        object.__setattr__(self, "collection_point", (float(point[0]), float(point[1])))
+            raise ConfigError("HarvestConfig.collection_point", f"must be None or two finite numbers (x, y) in m, "
+                                                                f"got {point!r}")
+        else:
+            object.__setattr__(self, "collection_point", (float(point[0]), float(point[1])))
         for name in ("reward_clean", "reward_damage", "reward_per_second"):
             _number(name, getattr(self, name), 0.0, what="a finite weight >= 0")

@@ -39,6 +39,9 @@ __all__ = ["MaskedActionError", "SMS3DHarvestEnv"]
 
 #: The bed when ``scene`` gives none: 50 mushrooms, the generator's mix of cap sizes.
 DEFAULT_SCENE = {"placement": {"num_mushrooms": 50}}
+#: Where collected mushrooms are parked with a tray on the head (``collection_point=None``): (x, y)
+#: off the bed, outside the terrain patch (m); at the travel height.
+OFF_BED = (0.38, 0.0)
 
 
 class MaskedActionError(ValueError):
@@ -119,7 +122,9 @@ class SMS3DHarvestEnv(gym.Env):
         self.picker = ScriptedPicker.for_env(self.pick)
         c = self.config
         self.motion = Motion(c.travel_speed, c.travel_accel, c.travel_height)
-        self.collection_point = np.array([*c.collection_point, c.travel_height])
+        self.collection_point = None if c.collection_point is None else np.array([*c.collection_point,
+                                                                                   c.travel_height])
+        self.park_point = np.array([*(c.collection_point or OFF_BED), c.travel_height])
         k = c.max_candidates
         self.RESCAN, self.STOP = k, k + 1
         self.action_space = spaces.Discrete(k + 2)
@@ -272,14 +277,19 @@ class SMS3DHarvestEnv(gym.Env):
         return last, clean and bool(tally.ready[k]), damaged
 
     def _collect(self, k: int) -> None:
-        """Carry picked mushroom ``k`` to the collection point, drop it there, and take it out of
-        the bed: it stays where it was carried (gravity compensated, as in a tray the simulation
-        does not model) and collides with nothing, so it can neither touch the bed nor be seen
-        in it again."""
+        """Carry picked mushroom ``k`` to the collection point (with a tray on the head: none),
+        drop it there, and take it out of the bed: it is parked at the collection point (with a
+        tray on the head, at ``OFF_BED``), gravity compensated, as in a tray the simulation does
+        not model, and collides with nothing, so it can neither touch the bed nor be seen in it
+        again."""
         pick, c = self.pick, self.config
         w = pick.world
         m, d = w.model, w.data
-        self.tally.time["carry"] += self.motion.time(d.site_xpos[w.tool_site], self.collection_point) + c.drop_time
+        self.tool_pos = d.site_xpos[w.tool_site].copy()
+        if self.collection_point is not None:
+            self.tally.time["carry"] += self.motion.time(self.tool_pos, self.collection_point)
+            self.tool_pos = self.collection_point.copy()
+        self.tally.time["carry"] += c.drop_time
         pick.picking.tool.release()
         b = w.body_ids[k]
         for g in (w.cap_geoms[k], w.stem_geoms[k]):
@@ -288,11 +298,10 @@ class SMS3DHarvestEnv(gym.Env):
         m.body_gravcomp[b] = 1.0
         joint = m.body_jntadr[b]
         qadr, dadr = m.jnt_qposadr[joint], m.jnt_dofadr[joint]
-        d.qpos[qadr:qadr + 3] = self.collection_point
+        d.qpos[qadr:qadr + 3] = self.park_point
         d.qvel[dadr:dadr + 6] = 0.0
         mujoco.mj_forward(m, d)
         self.collected.add(k)
-        self.tool_pos = self.collection_point.copy()
 
     # ------------------------------------------------------------------ observation
     def _obs(self) -> dict[str, np.ndarray]:

@@ -183,6 +183,17 @@ def test_time_accounting_adds_up(bed):
     assert s["yield"] == pytest.approx(s["picked_clean_ready"] / s["harvest_ready"])
 
 
+def test_a_tray_on_the_head_drops_where_it_picked(bed):
+    env = make(bed, harvest={"collection_point": None})
+    env.reset(seed=0)
+    _, (obs, _, _, _, info) = first_clean_pick(env)
+    w, k = env.pick.world, info["last_pick"]["target"]
+    assert info["time_carry_s"] == pytest.approx(env.config.drop_time)
+    np.testing.assert_allclose(obs["bed"][-3:], w.data.site_xpos[w.tool_site], atol=1e-3)  # no trip
+    np.testing.assert_allclose(w.data.xpos[w.body_ids[k]], env.park_point, atol=1e-6)
+    assert w.model.body_conaffinity[w.body_ids[k]] == 0
+
+
 def test_orders_clear_the_bed(bed):
     env = make(bed)
     for order in ("largest", "isolated"):
