@@ -109,6 +109,13 @@ class PickPhysicsParams:
         root_damping_ratio: damping of the root springs as a fraction of critical (each
             mushroom's own inertia about its stem base). ASSUMPTION: 0.5, plant tissue that does
             not ring after a push.
+        stem_in_casing: a released mushroom meets the casing from the moment it lets go: its
+            stem rests on the floor of its hole (``world.add_stem_sockets``) and its cap meets the
+            soil (one that tips over lands on it), whatever the tool; the stem meets the soil
+            once it has risen ``physics.SOIL_CLEARANCE`` out of it. False: a released mushroom
+            touches no soil until it has risen 5 mm, so one let go before falls through the
+            casing (the hand's stems rest on the floor) (v1). KNOWN SIMPLIFICATION: the hole has
+            no wall, so the released stem is not held sideways until it has risen out.
         clean_pick: success needs a clean pick, as a grower judges it: besides the target picked
             unbruised, no neighbour moved further than ``disturb_tolerance`` or knocked off its
             roots (``info["neighbours_disturbed"]``; ``info["target_picked"]`` says whether the
@@ -142,6 +149,7 @@ class PickPhysicsParams:
     mushrooms_collide: bool = True
     slip_bruising: bool = True
     slip_bruise_work: float = 0.005
+    stem_in_casing: bool = True
 
     def __post_init__(self) -> None:
         for name, value in self.__dict__.items():
@@ -165,7 +173,8 @@ class PickPhysicsParams:
 #: weld for a root, mushrooms that pass through each other, pressure bruising only, neighbours
 #: that do not count, a 20 kPa vacuum, friction 0.5, a 0.006 N m twist-off torque.
 V1_PHYSICS = {"vacuum": 20e3, "shear_friction": 0.5, "twist_torque": 0.006, "lip_seal": False,
-              "clean_pick": False, "mushrooms_collide": False, "slip_bruising": False, "compliant_root": False}
+              "clean_pick": False, "mushrooms_collide": False, "slip_bruising": False, "compliant_root": False,
+              "stem_in_casing": False}
 
 
 def physics_for(physics: PickPhysicsParams | Mapping[str, Any] | None, cup_radius: float) -> PickPhysicsParams:

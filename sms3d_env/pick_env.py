@@ -153,7 +153,9 @@ class SMS3DPickEnv(gym.Env):
       bruises by slip-shear (``slip_bruising``); success is a clean pick (``clean_pick``: no
       neighbour moved more than 5 mm or knocked off its roots), ``info["target_picked"]`` says
       whether the target itself was; the target is drawn among the harvest-ready mushrooms
-      (``target="harvest_ready"``); the cup is rated at 60 kPa, friction 0.3 on a moist cap,
+      (``target="harvest_ready"``); a released mushroom meets the casing at once
+      (``stem_in_casing``: its stem rests in its hole, its cap on the soil; it fell through the
+      casing when let go before rising 5 mm); the cup is rated at 60 kPa, friction 0.3 on a moist cap,
       twist-off torque 0.03 N m (Xu et al. 2025's range). ``info`` gains ``time_gripped_s`` and
       ``time_detached_s``. The class's defaults are v2's.
     - v1: the robot is physically honest. A Cartesian gantry harvester (``robot="gantry"``, the
@@ -298,7 +300,7 @@ class SMS3DPickEnv(gym.Env):
         self.world = w = build_world(scene, target, self.robot_cfg, self.scene_source.config.free_radius,
                                      ctrl.control_dt / ctrl.substeps, self.scene_source.models,
                                      self._model_key(slot, target), self.params.mushrooms_collide,
-                                     self.params.compliant_root)
+                                     self.params.compliant_root, self.params.stem_in_casing)
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched")
         self.done, self._end_on_bruise = False, True
         m, d = w.model, w.data

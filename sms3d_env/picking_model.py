@@ -9,6 +9,7 @@ every physics substep (dm_control's ``after_substep``), apart from the gym API.
 | bruising by slip-shear (``slip_bruising``): friction work slipping on a cap | ``_slip_shear`` | ``slip_bruise_work`` |
 | neighbours disturbed: moved further than the tolerance, or detached | ``after_step`` | ``disturb_tolerance`` |
 | soil contacts of detached mushrooms once their stem is out of the soil | ``after_step`` | ``physics.SOIL_CLEARANCE`` |
+| a released mushroom meets the casing at once (``stem_in_casing``): its cap the soil, its stem its hole's floor | ``after_step``, ``world.add_stem_sockets`` | |
 | success: target detached, held, lifted, unbruised (with ``clean_pick``: no neighbour disturbed) | ``picked``, ``success`` | ``lift_height``, ``clean_pick`` |
 
 Usage (what ``SMS3DPickEnv.step`` does)::
@@ -135,8 +136,15 @@ class PickingModel:
         ep.disturbed |= {k for k in ep.detached if k != ep.target}
         m = w.model
         for k in ep.detached:
-            b = w.body_ids[k]
-            if m.body_conaffinity[b] != w.lifted_aff and d.xpos[b, 2] - self.init_xpos[k, 2] > ph.SOIL_CLEARANCE:
+            b, cap = w.body_ids[k], w.cap_geoms[k]
+            if self.params.stem_in_casing and m.geom_conaffinity[cap] != w.lifted_aff:
+                # The cap stands above the soil: it meets it from the moment the mushroom is
+                # released (one that tips over lands on its cap) unless it already presses into it.
+                self._set_soil_contact(k, True, (cap,))
+                if self._penetrates_soil(k, cap):
+                    self._set_soil_contact(k, False, (cap,))
+            if m.geom_conaffinity[w.stem_geoms[k]] != w.lifted_aff and \
+                    d.xpos[b, 2] - self.init_xpos[k, 2] > ph.SOIL_CLEARANCE:
                 self._set_soil_contact(k, True)
                 # Only once the stem's collision hull is out of the soil: switching contacts on
                 # while it still penetrates (a sloped or tilted stem base) throws the mushroom
@@ -236,16 +244,19 @@ class PickingModel:
                 ep.root_util = max(ep.root_util, u)
 
     # ------------------------------------------------------------------ soil contacts
-    def _set_soil_contact(self, k: int, on: bool) -> None:
+    def _set_soil_contact(self, k: int, on: bool, geoms: tuple[int, ...] | None = None) -> None:
+        """Soil contacts of detached mushroom ``k``'s ``geoms`` (its cap and stem if None) on
+        or off; its body's mask (the broadphase's) is the union of its geoms'."""
         w = self.world
+        m = w.model
         aff = w.lifted_aff if on else w.free_aff
-        for g in (w.cap_geoms[k], w.stem_geoms[k]):
-            w.model.geom_conaffinity[g] = aff
-        w.model.body_conaffinity[w.body_ids[k]] = aff
+        for g in (w.cap_geoms[k], w.stem_geoms[k]) if geoms is None else geoms:
+            m.geom_conaffinity[g] = aff
+        m.body_conaffinity[w.body_ids[k]] = m.geom_conaffinity[w.cap_geoms[k]] | m.geom_conaffinity[w.stem_geoms[k]]
 
-    def _penetrates_soil(self, k: int) -> bool:
-        """Whether mushroom ``k`` penetrates the soil now (runs the collision detector; the
-        next physics step recomputes the contacts from scratch)."""
+    def _penetrates_soil(self, k: int, geom: int | None = None) -> bool:
+        """Whether mushroom ``k`` (its ``geom`` alone, if given) penetrates the soil now (runs
+        the collision detector; the next physics step recomputes the contacts from scratch)."""
         w = self.world
         m, d = w.model, w.data
         mujoco.mj_collision(m, d)
@@ -253,7 +264,8 @@ class PickingModel:
         if ncon == 0:
             return False
         geoms = d.contact.geom[:ncon]
-        mine = (w.geom_mushroom[geoms] == k).any(axis=1) & (geoms == w.terrain_geom).any(axis=1)
+        mine = ((w.geom_mushroom[geoms] == k) if geom is None else (geoms == geom)).any(axis=1) & \
+            (geoms == w.terrain_geom).any(axis=1)
         return bool(np.any(d.contact.dist[:ncon][mine] < 0.0))
 
     # ------------------------------------------------------------------ outcome

@@ -3,9 +3,10 @@ and the id tables the picking model and the env read (dm_control's entities, apa
 
 ``build_world(scene, target, ...)`` returns a ``World``. Only mushrooms within ``free_radius`` of
 the target keep a free joint and a root weld; with the suction tool each of them also gets an
-inactive grip weld to the cup, with the hand a stem socket (``add_stem_sockets``) that holds it
-up once detached. Contact masks (physics.py's bits) are set here once; the picking
-model changes them as mushrooms detach and lift. The ``pick`` camera is aimed at the target
+inactive grip weld to the cup; the floor of its hole in the casing (``add_stem_sockets``; with
+the suction tool, ``stem_in_casing``) holds it up once detached, until it is lifted out. Contact
+masks (physics.py's bits) are set here once; the picking model changes them as mushrooms detach
+and lift. The ``pick`` camera is aimed at the target
 (``aim_pick_camera``).
 """
 
@@ -65,7 +66,7 @@ class World:
         wrench_adr (6,): sensordata addresses of the wrist force (3, N) and torque (3, N m).
         cap_radius (n,): m.
         free_aff, lifted_aff: conaffinity of detached mushrooms before and after they clear the
-            soil (the hand's stem sockets add a bit).
+            soil (the holes in the casing add a bit).
         cup_mask: the cup face's (contype, conaffinity) when not sealed.
     """
 
@@ -128,8 +129,9 @@ def free_set(scene: Any, target: int, free_radius: float | None) -> set[int]:
 
 def add_stem_sockets(spec: mujoco.MjSpec, scene: Any, ids: Iterable[int], drop: float = 0.001) -> None:
     """A thin static box ``drop`` below the lowest point of each listed mushroom's stem, felt
-    only by detached mushrooms (``physics.SOCKET_CONTYPE``): the casing around the stem base that
-    holds a detached mushroom up until it is lifted out of its hole."""
+    only by detached mushrooms (``physics.SOCKET_CONTYPE``): the floor of the hole in the casing
+    around the stem base, which holds a released mushroom up until it is lifted out of it (the
+    soil's own contacts wait until its stem is clear of the soil: ``PickingModel.after_step``)."""
     for i in ids:
         inst = scene.instances[i]
         local = np.asarray(inst.model.stem_mesh.vertices) * inst.scale_vector
@@ -164,11 +166,12 @@ def aim_pick_camera(model: mujoco.MjModel, cap_top: np.ndarray, mount_pos: Seque
 
 
 def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float,
-               compliant_root: bool = False) -> mujoco.MjSpec:
+               compliant_root: bool = False, stem_in_casing: bool = False) -> mujoco.MjSpec:
     """The scene + robot ``MjSpec`` (grip welds or stem sockets per free mushroom, cameras).
     ``compliant_root``: each root is a ball constraint at the stem base (``connect``) instead of
     a weld, its bending and twist left to :mod:`sms3d_env.roots`' springs, gravity compensated
-    while rooted."""
+    while rooted; ``stem_in_casing``: the floor of every free mushroom's hole in the casing
+    (``add_stem_sockets``) whatever the tool (else the hand's alone)."""
     from generator.mjcf import scene_to_spec
 
     spec = scene_to_spec(scene, free_ids=free)
@@ -179,13 +182,14 @@ def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float,
             root.data[:] = 0.0  # the anchor: body1's (the mushroom's) origin, its stem base
             spec.body(f"mushroom_{i}").gravcomp = 1.0
     attach_robot(spec, robot)
+    if robot.tool != "suction" or stem_in_casing:
+        add_stem_sockets(spec, scene, sorted(free))
     if robot.tool == "suction":
         for i in sorted(free):
             spec.add_equality(name=f"grip_{i}", type=mujoco.mjtEq.mjEQ_WELD,
                               objtype=mujoco.mjtObj.mjOBJ_BODY, name1=robot.prefix + CUP_BODY,
                               name2=f"mushroom_{i}", active=False)
     else:
-        add_stem_sockets(spec, scene, sorted(free))
         # Friction grasps creep out of MuJoCo's default pyramidal cone (impratio 1): lifted
         # mushrooms slid out of the closed fingers. The elliptic cone with impratio 10 (MuJoCo's
         # remedy for slip) keeps them (9 of 40 picked with the pyramidal cone, 26 grips lost;
@@ -207,23 +211,24 @@ def world_spec(scene: Any, free: set[int], robot: RobotSpec, timestep: float,
 
 def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | None,
                 timestep: float, cache: dict[Any, mujoco.MjModel] | None = None,
-                cache_key: Any = None, mushrooms_collide: bool = False, compliant_root: bool = False) -> World:
+                cache_key: Any = None, mushrooms_collide: bool = False, compliant_root: bool = False,
+                stem_in_casing: bool = False) -> World:
     """Assemble the world; with ``cache`` and ``cache_key``, the compiled model is kept there
     and copied (3 ms against 45 ms for a compile), as an episode changes its model (contact
     masks, weld data). ``mushrooms_collide``: every mushroom also collides with every other
     (``ValueError`` naming the pair when two of the bed's collision hulls interpenetrate at
-    rest by more than ``physics.MAX_REST_PENETRATION``); ``compliant_root``: see
-    ``world_spec``."""
+    rest by more than ``physics.MAX_REST_PENETRATION``); ``compliant_root``, ``stem_in_casing``:
+    see ``world_spec``."""
     n = len(scene.instances)
     free = free_set(scene, target, free_radius)
     suction = robot.tool == "suction"
     compiled = cache is None or cache_key is None or cache_key not in cache
     if cache is not None and cache_key is not None:
         if compiled:
-            cache[cache_key] = world_spec(scene, free, robot, timestep, compliant_root).compile()
+            cache[cache_key] = world_spec(scene, free, robot, timestep, compliant_root, stem_in_casing).compile()
         m = copy.copy(cache[cache_key])
     else:
-        m = world_spec(scene, free, robot, timestep, compliant_root).compile()
+        m = world_spec(scene, free, robot, timestep, compliant_root, stem_in_casing).compile()
     aim_pick_camera(m, scene.instances[target].cap_top, robot.mount_pos)
     d = mujoco.MjData(m)
     is_free = np.array([i in free for i in range(n)])
@@ -259,7 +264,8 @@ def build_world(scene: Any, target: int, robot: RobotSpec, free_radius: float | 
     robot_geom[[g for g in range(m.ngeom) if m.geom(g).name.startswith(prefix)]] = True
     cup_geom = m.geom(prefix + CUP_GEOM).id if suction else -1  # -1: the seal test never fires
     force, torque = m.sensor(prefix + WRIST_FORCE), m.sensor(prefix + WRIST_TORQUE)
-    socket = 0 if suction else ph.SOCKET_CONAFFINITY
+    socket = ph.SOCKET_CONAFFINITY if stem_in_casing or not suction else 0
+
     if mushrooms_collide and compiled:  # a cached model's bed passed when it was compiled
         overlaps = interpenetrating_mushrooms(m, geom_mushroom)
         if overlaps:
