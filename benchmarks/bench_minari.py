@@ -24,7 +24,7 @@ import gymnasium as gym  # noqa: E402
 import sms3d_env  # noqa: E402, F401
 from sms3d_env.pickers.scripted import ScriptedPicker  # noqa: E402
 from sms3d_env.training.demonstrations import ExpertLabels, minari_root, record_datasets  # noqa: E402
-from sms3d_env.training.imitation import TRAIN_ENV_ID, train_env_kwargs  # noqa: E402
+from sms3d_env.training.envs import TRAIN_ENV_ID, env_kwargs  # noqa: E402
 
 
 def _episodes(env: gym.Env, seeds: range, labelled: bool) -> int:
@@ -43,7 +43,7 @@ def _episodes(env: gym.Env, seeds: range, labelled: bool) -> int:
 
 
 def bare(seeds: range, mushrooms: int) -> tuple[int, float]:
-    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(mushrooms))
+    env = gym.make(TRAIN_ENV_ID, **env_kwargs(mushrooms))
     t = time.perf_counter()
     steps = _episodes(env, seeds, labelled=False)
     wall = time.perf_counter() - t
@@ -52,7 +52,7 @@ def bare(seeds: range, mushrooms: int) -> tuple[int, float]:
 
 
 def labels_only(seeds: range, mushrooms: int) -> tuple[int, float]:
-    env = ExpertLabels(gym.make(TRAIN_ENV_ID, **train_env_kwargs(mushrooms)), ScriptedPicker.for_env)
+    env = ExpertLabels(gym.make(TRAIN_ENV_ID, **env_kwargs(mushrooms)), ScriptedPicker.for_env)
     t = time.perf_counter()
     steps = _episodes(env, seeds, labelled=True)
     wall = time.perf_counter() - t
@@ -62,7 +62,7 @@ def labels_only(seeds: range, mushrooms: int) -> tuple[int, float]:
 
 def recorded(seeds: range, mushrooms: int, root: Path, run: int) -> tuple[int, float]:
     with minari_root(root):
-        env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(mushrooms))
+        env = gym.make(TRAIN_ENV_ID, **env_kwargs(mushrooms))
         t = time.perf_counter()
         dataset, = record_datasets([(f"bench/scripted-v{run}", env)], ScriptedPicker.for_env, seeds,
                                    {"picker": "scripted"}, progress=False)

@@ -1,11 +1,13 @@
 """PPO training throughput (env steps per wall second) of the from-scratch recipe for each way
-of stepping the envs (``--vec-env``) and each observation layout (``--flat-observation``).
+of stepping the envs (``--vec-env``) and each observation layout (the recipe's flattened one, or
+the dict observation with ``MultiInputPolicy``).
 
-Each row trains the from-scratch recipe's PPO (``SMS3DPickTrain-v2``, observation normalisation,
-pre-grasp starts, a rate falling over the wall clock, 2 envs, rollouts of 1024 steps per env)
-for ``--steps`` env steps with no periodic evaluation or checkpoints, on a small scene pool (``--pool``) that the
-first episodes fill, so that the rate is the steady one of a long run and not bed generation's.
-The rate counts the whole ``train_policy`` call: worker start-up, rollouts and updates.
+Each row trains the shipped ``ppo`` recipe with RL Zoo's trainer (``SMS3DPickTrain-v2``,
+normalisation, pre-grasp starts, a rate falling over the wall clock, rollouts of 1024 steps per
+env) for ``--steps`` env steps with no periodic evaluation or checkpoints, on a small scene pool
+(``--pool``) that the first episodes fill, so that the rate is the steady one of a long run and
+not bed generation's. The rate counts the whole training call: worker start-up, rollouts and
+updates.
 
 Usage: python benchmarks/bench_training_throughput.py [--steps 32768] [--pool 16] [--n-envs 2]
 """
@@ -22,18 +24,20 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "egl")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # runs from a checkout
 
-from sms3d_env.training import TrainConfig, train_policy  # noqa: E402
+from sms3d_env.training.recipes import read_recipe  # noqa: E402
+from sms3d_env.training.zoo import train_zoo, zoo_argv  # noqa: E402
 
 LAYOUTS = (("subproc", False), ("subproc", True), ("dummy", False), ("dummy", True))
 
 
 def steps_per_s(vec_env: str, flat: bool, steps: int, pool: int, n_envs: int, out: str) -> float:
-    cfg = TrainConfig(env_id="SMS3DPickTrain-v2", normalize=True, scene_pool=pool, n_envs=n_envs,
-                      vec_env=vec_env, flat_observation=flat, num_mushrooms=10, pregrasp_start=0.75,
-                      pregrasp_anneal=True, target_kl=0.02, log_std_init=-1.0, total_steps=steps,
-                      eval_freq=0, checkpoint_freq=0, seed=0, out=out, verbose=0)
+    env_kwargs = dict(read_recipe("ppo").config["env_kwargs"])
+    env_kwargs["scene"] = {**env_kwargs["scene"], "pool": pool}
+    layout = {} if flat else {"env_wrapper": None, "policy": "MultiInputPolicy"}
+    argv = zoo_argv("ppo", out=out, steps=steps, n_envs=n_envs, vec_env=vec_env, eval_freq=0,
+                    hyperparams={"env_kwargs": env_kwargs, **layout})
     t0 = time.perf_counter()
-    train_policy(cfg)
+    train_zoo(argv)
     return steps / (time.perf_counter() - t0)
 
 

@@ -1,17 +1,15 @@
-"""The files of a policy run on disk: models saved through a temporary file and a rename, each
-with the description of its policy that a load without unpickling needs, and the observation
-statistics of a normalised run and SAC's replay buffer as plain arrays, never a pickle.
+"""A saved policy's files: models saved through a temporary file and a rename, each with the
+description of its policy that a load without unpickling needs, and the observation statistics
+of a normalised run as plain arrays, never a pickle.
 
 Why: SB3's ``model.save`` writes its zip in place, so a run killed while saving left an empty or
-cut ``model.zip`` or checkpoint; SB3's ``VecNormalize.save`` and ``save_replay_buffer`` pickle
-the whole object, so loading them unpickled whatever the file held; and SB3's zip pickles the
-policy class, spaces and schedules. :func:`save_model` (through
-:func:`generator.files.write_via_temp`) serves every save of a run (final model, best model,
-checkpoints) and adds :data:`POLICY_SPEC_MEMBER` to the zip
-(:class:`~sms3d_env.policies.spec.PolicySpec`, read back by
-:func:`~sms3d_env.policies.loader.load_sb3`); :class:`ObservationStats` holds ``VecNormalize``'s
-running means and variances, and :func:`save_replay_buffer` a replay buffer's arrays, read back
-with ``allow_pickle=False``.
+cut ``model.zip``; SB3's ``VecNormalize.save`` pickles the whole object, so loading it unpickled
+whatever the file held; and SB3's zip pickles the policy class, spaces and schedules.
+:func:`save_model` (through :func:`generator.files.write_via_temp`) adds
+:data:`POLICY_SPEC_MEMBER` to the zip (:class:`~sms3d_env.policies.spec.PolicySpec`, read back
+by :func:`~sms3d_env.policies.loader.load_sb3`); :class:`ObservationStats` holds
+``VecNormalize``'s running means and variances (``obs_rms.npz``, what the package's RL trainer
+wrote beside its models before 0.2.0), read back with ``allow_pickle=False``.
 """
 
 from __future__ import annotations
@@ -44,8 +42,6 @@ MAX_MODEL_BYTES = 1024 * 2**20
 #: (``obs_rms.npz``, an RL Zoo run's ``vecnormalize.pkl``).
 MAX_RUN_FILE_BYTES = 1 * 2**20
 MAX_STATS_BYTES = MAX_METADATA_BYTES
-#: The most bytes of a ``.npy`` header in an ``.npz`` member (numpy writes 128 for these arrays).
-NPY_HEADER_BYTES = 4096
 
 #: The observation statistics beside a normalised run's ``model.zip`` (and ``best/best_model.zip``).
 OBS_STATS_FILE = "obs_rms.npz"
@@ -179,56 +175,6 @@ def record_policy_spec(path: str | Path, algo: str | None = None) -> None:
     write_via_temp(path, write)
 
 
-def _replay_arrays(buffer: Any) -> dict[str, np.ndarray]:
-    """The arrays of an SB3 ``ReplayBuffer``/``DictReplayBuffer`` by name (a dict buffer's
-    observations per key: ``observations.<key>``)."""
-    arrays: dict[str, np.ndarray] = {}
-    for name in ("observations", "next_observations", "actions", "rewards", "dones", "timeouts"):
-        value = getattr(buffer, name, None)  # no next_observations with optimize_memory_usage
-        if isinstance(value, dict):
-            arrays.update({f"{name}.{k}": v for k, v in value.items()})
-        elif value is not None:
-            arrays[name] = value
-    return arrays
-
-
-def save_replay_buffer(buffer: Any, path: str | Path) -> None:
-    """An SB3 replay buffer's arrays and write position to ``path`` (``.npz``), atomically."""
-    arrays = {**_replay_arrays(buffer), "pos": np.int64(buffer.pos), "full": np.bool_(buffer.full)}
-    write_via_temp(path, lambda tmp: np.savez(tmp, **arrays))
-
-
-def load_replay_buffer(buffer: Any, path: str | Path) -> None:
-    """Fill ``buffer`` (the run's own, as its model built it) with what :func:`save_replay_buffer`
-    wrote, unpickling nothing; ``PolicyFileError`` naming the file when it is missing, cut or of
-    another buffer (other arrays, shapes or dtypes)."""
-    path = Path(path)
-    targets = _replay_arrays(buffer)
-    # Each array's member may hold its bytes and a .npy header, no more (pos and full: a header and 8 bytes).
-    limits = {f"{name}.npy": target.nbytes + NPY_HEADER_BYTES for name, target in targets.items()}
-    try:
-        with zipfile.ZipFile(path) as archive:
-            check_zip_sizes(path, archive, lambda name: limits.get(name, NPY_HEADER_BYTES + 8),
-                            sum(limits.values()) + 2 * (NPY_HEADER_BYTES + 8))
-        with np.load(path, allow_pickle=False) as z:
-            if set(z.files) != {*targets, "pos", "full"}:
-                raise ValueError(f"arrays {sorted(z.files)}, expected {sorted({*targets, 'pos', 'full'})}")
-            for name, target in targets.items():
-                saved = z[name]
-                if saved.shape != target.shape or saved.dtype != target.dtype:
-                    raise ValueError(f"{name} is {saved.dtype} {saved.shape}, the run's buffer {target.dtype} "
-                                     f"{target.shape}")
-                target[...] = saved
-            pos, full = int(z["pos"]), bool(z["full"])
-    except PolicyFileError:
-        raise
-    except (OSError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
-        raise PolicyFileError(path, f"not this run's replay buffer ({described_error(exc)})") from None
-    if not 0 <= pos < buffer.buffer_size:
-        raise PolicyFileError(path, f"write position {pos} outside the buffer's {buffer.buffer_size} rows")
-    buffer.pos, buffer.full = pos, full
-
-
 @dataclass(frozen=True)
 class RunningStats:
     """One ``RunningMeanStd``: the running mean, variance and sample count."""
@@ -258,18 +204,6 @@ class ObservationStats:
         rms = venv.obs_rms if isinstance(venv.obs_rms, dict) else {None: venv.obs_rms}
         return cls({k: _copy(r) for k, r in rms.items()}, float(venv.clip_obs), float(venv.epsilon),
                    bool(venv.norm_reward), _copy(venv.ret_rms), float(venv.clip_reward), float(venv.gamma))
-
-    def apply_to(self, venv: Any) -> None:
-        """Set a ``VecNormalize``'s statistics to these (a resumed run's, or an ``init_model``'s);
-        ``ValueError`` when its observation has other keys or shapes."""
-        rms = venv.obs_rms if isinstance(venv.obs_rms, dict) else {None: venv.obs_rms}
-        if set(rms) != set(self.obs) or any(rms[k].mean.shape != self.obs[k].mean.shape for k in rms):
-            raise ValueError(f"observation statistics of {_layout(self.obs)} do not fit the env's {_layout(rms)}")
-        for k, r in rms.items():
-            r.mean, r.var, r.count = self.obs[k].mean.copy(), self.obs[k].var.copy(), self.obs[k].count
-        if self.returns is not None:
-            venv.ret_rms.mean, venv.ret_rms.var = self.returns.mean.copy(), self.returns.var.copy()
-            venv.ret_rms.count = self.returns.count
 
     def normalize_obs(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray | dict[str, np.ndarray]:
         """``obs`` standardised and clipped as ``VecNormalize.normalize_obs`` does (float32)."""
@@ -346,32 +280,3 @@ def _copy(r: Any) -> RunningStats:
 
 def _shapes_text(shapes: dict[str | None, tuple[int, ...]]) -> str:
     return ", ".join(f"{'one array' if k is None else k} {shape}" for k, shape in shapes.items())
-
-
-def _layout(rms: dict[str | None, Any]) -> str:
-    return ", ".join(f"{'observation' if k is None else k} {tuple(r.mean.shape)}" for k, r in sorted(
-        rms.items(), key=lambda kv: str(kv[0])))
-
-
-def run_settings(config: dict[str, Any]) -> dict[str, Any]:
-    """What a run's folder records as its settings (:func:`generator.run_folder.open_run_folder`):
-    its configuration but ``out``, the folder itself (a run moved elsewhere resumes there)."""
-    return {k: v for k, v in config.items() if k != "out"}
-
-
-def finished_run(folder: Path, **expected: Any) -> dict[str, Any] | None:
-    """The summary of the finished run in ``folder``, after saying so: its ``summary.json`` (the
-    last file a run writes), when that holds the ``expected`` values; None otherwise."""
-    path = folder / "summary.json"
-    if not path.is_file():
-        return None
-    try:
-        summary = parse_json(read_run_text(path, "run summary"), path, "run summary")
-        if not isinstance(summary, dict):
-            raise PolicyFileError(path, "not a readable run summary (no JSON object)")
-    except PolicyFileError as exc:
-        raise PolicyFileError(path, f"{exc.message}; --overwrite to start the run anew") from None
-    if any(summary.get(k) != v for k, v in expected.items()):
-        return None
-    print(f"{folder} is complete ({path.name}); nothing to do (--overwrite to start it anew)")
-    return summary

@@ -78,7 +78,7 @@ def saved_config_path(model_path: str | Path) -> Path | None:
 
 #: A checkpoint's files by part: (name infix, extension), named as SB3's ``CheckpointCallback``
 #: names them (``ppo_obs_rms_1400000_steps.npz`` beside ``ppo_1400000_steps.zip``).
-CHECKPOINT_PARTS = {"model": ("", "zip"), "obs_rms": ("obs_rms_", "npz"), "replay_buffer": ("replay_buffer_", "npz")}
+CHECKPOINT_PARTS = {"model": ("", "zip"), "obs_rms": ("obs_rms_", "npz")}
 
 
 def checkpoint_path(folder: str | Path, algo: str, steps: int, part: str = "model") -> Path:
@@ -135,8 +135,7 @@ def load_model(model_path: str | Path, algo: str | None = None, spec: PolicySpec
 
 
 #: Pickled entries of an SB3 model's ``data`` that need nothing from the file: the last
-#: observations and episode records of envs that are gone (a resumed ``learn`` starts them anew)
-#: and ``lr_schedule`` (``_setup_model`` rebuilds it from ``learning_rate``). Loaded as ``None``.
+#: observations and episode records of envs that are gone and ``lr_schedule`` (``_setup_model`` rebuilds it from ``learning_rate``). Loaded as ``None``.
 UNUSED_PICKLED_ENTRIES = ("_last_obs", "_last_original_obs", "_last_episode_starts", "ep_info_buffer",
                           "ep_success_buffer", "lr_schedule")
 #: Entries SB3's ``save`` leaves out of ``data``: a file holding one was not written by it (and
@@ -150,13 +149,11 @@ def _is_pickled(value: Any) -> bool:
     return isinstance(value, dict) and ":serialized:" in value
 
 
-def _trusted_entries(path: Path, data: dict[str, Any], spec: PolicySpec,
-                     hyperparameters: dict[str, Any]) -> dict[str, Any]:
+def _trusted_entries(path: Path, data: dict[str, Any], spec: PolicySpec) -> dict[str, Any]:
     """A value for every pickled entry of ``data`` (SB3's ``custom_objects``: SB3 takes these
     instead of unpickling), plus the policy's class, spaces and ``policy_kwargs`` from ``spec``
     whatever the file says: an entry of :data:`UNUSED_PICKLED_ENTRIES` is ``None``, a
-    hyperparameter (a schedule, a buffer class) is ``hyperparameters``' value or else the
-    algorithm's default. ``PolicyFileError`` naming the file for any other pickled entry."""
+    hyperparameter (a schedule, a buffer class) the algorithm's default (acting needs none). ``PolicyFileError`` naming the file for any other pickled entry."""
     never_saved = sorted(set(data) & set(NEVER_SAVED_ENTRIES))
     if never_saved:
         raise PolicyFileError(path, f"holds entries that SB3's save leaves out ({never_saved}): not a model SB3 wrote")
@@ -178,8 +175,6 @@ def _trusted_entries(path: Path, data: dict[str, Any], spec: PolicySpec,
             continue
         if key in UNUSED_PICKLED_ENTRIES:
             trusted[key] = None
-        elif key in hyperparameters:
-            trusted[key] = hyperparameters[key]
         elif key in defaults:
             trusted[key] = defaults[key]
         else:
@@ -281,14 +276,12 @@ def _check_finite_weights(path: Path, model: Any) -> None:
             raise PolicyFileError(path, f"policy.pth: {name} holds values that are not finite (NaN or infinite)")
 
 
-def load_sb3(path: str | Path, algos: tuple[str, ...], spec: PolicySpec | None = None,
-             hyperparameters: dict[str, Any] | None = None, env: Any = None, device: str = "cpu") -> Any:
+def load_sb3(path: str | Path, algos: tuple[str, ...], spec: PolicySpec | None = None) -> Any:
     """A PPO/SAC model from ``path`` without unpickling anything in it: SB3's ``load`` with every
     pickled entry of the zip's ``data`` given in its place (:func:`_trusted_entries`), the policy
     built from ``spec`` or else the zip's :data:`~sms3d_env.policies.files.POLICY_SPEC_MEMBER`,
-    and the weights read by ``torch.load(weights_only=True)``. ``algos``: the algorithms the
-    model may be; ``hyperparameters``: values for pickled constructor arguments (a resumed run's
-    learning-rate schedule); ``env``: the env to go on training in.
+    and the weights read by ``torch.load(weights_only=True)``, on the CPU. ``algos``: the
+    algorithms the model may be.
 
     ``PolicyFileError`` naming the file when it is no SB3 model (or cut short, or a member
     inflates past its limit), holds no description of its policy (saved by an earlier version,
@@ -306,11 +299,10 @@ def load_sb3(path: str | Path, algos: tuple[str, ...], spec: PolicySpec | None =
                                     "code pickled in it)")
     if spec.algo not in algos:
         raise PolicyFileError(path, f"is a {spec.algo.upper()} model, not {names}")
-    trusted = _trusted_entries(path, model_zip.data, spec, hyperparameters or {})
+    trusted = _trusted_entries(path, model_zip.data, spec)
     _check_torch_variables(path, model_zip.archive, spec.algo)
     try:
-        model = algorithm_class(spec.algo).load(io.BytesIO(model_zip.raw), env=env, device=device,
-                                                custom_objects=trusted)
+        model = algorithm_class(spec.algo).load(io.BytesIO(model_zip.raw), device="cpu", custom_objects=trusted)
     except Exception as exc:  # noqa: BLE001  (SB3 raises AssertionError, KeyError, ValueError, RuntimeError, ...)
         raise PolicyFileError(path, f"does not load as the {spec.algo.upper()} {spec.policy} it describes "
                                     f"({described_error(exc)})") from None

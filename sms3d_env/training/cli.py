@@ -14,22 +14,14 @@ from generator.run_folder import RunFolderError
 from sms3d_env.episode_video import check_frame_size, claim_video_folder
 from sms3d_env.policies.files import PolicyFileError
 from sms3d_env.policies.spec import package_env_ids
-from sms3d_env.training.config import (
-    ALGOS,
-    ENV_IDS,
-    POSE_SOURCES,
-    POSTURE_TARGETS,
-    REWARD_TYPES,
-    VEC_ENVS,
-)
+from sms3d_env.training.envs import POSTURE_TARGETS
 from sms3d_env.training.evaluation import evaluate_policy_success, success_line
-from sms3d_env.training.recipes import ARTICLES, field_names
-from sms3d_env.training.recipes import KINDS as RECIPE_KINDS
-from sms3d_env.training.rl import InitModelError, train_policy
 from sms3d_env.training.zoo import RecipeError
 
 #: What the training commands raise, before writing anything, for input they cannot use.
-INPUT_ERRORS = (InitModelError, RunFolderError, PolicyFileError)
+INPUT_ERRORS = (RunFolderError, PolicyFileError)
+#: How a deprecated flag warns: the release that deprecated it and when it goes.
+DEPRECATION = "deprecated in 0.2.0 and removed after 2027-06-06"
 
 
 def _summary_or_refusal(run: Callable[[], dict[str, Any]]) -> int:
@@ -44,41 +36,28 @@ def _summary_or_refusal(run: Callable[[], dict[str, Any]]) -> int:
     return 0
 
 
-#: ``sms3d train-policy`` flags that set a recipe's field: flag dest → field name.
-FIELD_FLAGS = {"out": "out", "seed": "seed", "env_id": "env_id", "steps": "total_steps", "max_wall_s": "max_wall_s",
-               "n_envs": "n_envs", "vec_env": "vec_env", "num_mushrooms": "num_mushrooms",
-               "scene_pool": "scene_pool", "pose_error_deg": "pose_error_deg",
-               "pose_error_range": "pose_error_range_deg", "init_model": "init_model", "demos": "demos",
-               "eval_freq": "eval_freq", "eval_episodes": "eval_episodes", "checkpoint_freq": "checkpoint_freq"}
-#: Flags that set a field before recipes were data, deprecated on 2026-12-06 (removed after 2027-06-06):
-#: flag → (field, argparse keywords). They still work, with a warning naming the replacement.
-DEPRECATED_FIELD_FLAGS: dict[str, tuple[str, dict[str, Any]]] = {
-    "--algo": ("algo", {"choices": ALGOS}),
-    "--normalize": ("normalize", {"action": "store_const", "const": True}),
-    "--normalize-reward": ("normalize_reward", {"action": "store_const", "const": True}),
-    "--flat-observation": ("flat_observation", {"action": "store_const", "const": True}),
-    "--pose-source": ("pose_source", {"choices": POSE_SOURCES}),
-    "--log-std-init": ("log_std_init", {"type": float}),
-    "--reward-type": ("reward_type", {"choices": REWARD_TYPES}),
-    "--posture-target": ("posture_target", {"choices": POSTURE_TARGETS}),
-    "--pregrasp-start": ("pregrasp_start", {"type": float}),
-    "--pregrasp-anneal": ("pregrasp_anneal", {"action": "store_const", "const": True}),
-    "--gamma": ("gamma", {"type": float}),
-    "--learning-rate": ("learning_rate", {"type": float}),
-    "--learning-rate-final": ("learning_rate_final", {"type": float}),
-    "--learning-rate-by-wall": ("learning_rate_by_wall", {"action": "store_const", "const": True}),
-    "--target-kl": ("target_kl", {"type": float}),
+#: ``sms3d train-policy`` flags of RL recipes, by dest: each a keyword of ``zoo_argv`` (an RL Zoo flag).
+RL_FLAGS = ("algo", "env_id", "steps", "n_envs", "vec_env", "eval_freq", "eval_episodes", "checkpoint_freq",
+            "init_model")
+#: Flags of bc recipes: flag dest → ``BCConfig`` field.
+BC_FLAGS = {"num_mushrooms": "num_mushrooms", "pose_error_deg": "pose_error_deg",
+            "pose_error_range": "pose_error_range_deg", "demos": "demos"}
+#: Flags that set a bc recipe's field before recipes were data: flag → (field, argparse keywords).
+#: They still work, with a warning naming the replacement.
+DEPRECATED_BC_FLAGS: dict[str, tuple[str, dict[str, Any]]] = {
     "--demo-episodes": ("episodes", {"type": int}),
     "--demo-mushrooms": ("num_mushrooms", {"type": int, "nargs": "+"}),
     "--action-noise": ("action_noise", {"type": float}),
     "--epochs": ("epochs", {"type": int}),
     "--dagger-rounds": ("dagger_rounds", {"type": int}),
     "--dagger-episodes": ("dagger_episodes", {"type": int}),
+    "--posture-target": ("posture_target", {"choices": POSTURE_TARGETS}),
 }
-#: Flags of options removed on 2026-12-06 because the runs that used them measured worse
-#: (CHANGELOG.md); refused by name rather than as unknown arguments.
-REMOVED_FLAGS = {"--critic-warmup-steps": 1, "--time-limit-terminal": 0, "--use-sde": 0, "--sde-sample-freq": 1}
-DEPRECATION = "deprecated on 2026-12-06, removed after 2027-06-06"
+#: Flags of the package's own RL trainer, which 0.2.0 replaced by RL Zoo's; refused by name.
+RL_TRAINER_FLAGS = ("--normalize", "--normalize-reward", "--flat-observation", "--pose-source", "--log-std-init",
+                    "--reward-type", "--pregrasp-start", "--pregrasp-anneal", "--gamma", "--learning-rate",
+                    "--learning-rate-final", "--learning-rate-by-wall", "--target-kl", "--max-wall-s", "--scene-pool",
+                    "--critic-warmup-steps", "--time-limit-terminal", "--use-sde", "--sde-sample-freq")
 
 
 def _dest(flag: str) -> str:
@@ -86,65 +65,68 @@ def _dest(flag: str) -> str:
 
 
 def _recipe_of(args: Any) -> Any:
-    """The recipe that ``args`` names, with the fields its flags and ``--hyperparams`` set
+    """The recipe that ``args`` names, with the bc fields its flags and ``--hyperparams`` set
     (``RecipeError`` or ``FileNotFoundError`` naming what it cannot use)."""
     import sys
 
-    from sms3d_env.training.recipes import default_recipe, parse_hyperparams, read_recipe
+    from sms3d_env.training.imitation import BCConfig
+    from sms3d_env.training.recipes import Recipe, parse_hyperparams, read_recipe
 
-    named = [(flag, value) for flag, value in (("RECIPE", args.recipe), ("--recipe", args.legacy_recipe),
-                                               ("--conf-file", args.legacy_conf_file)) if value is not None]
-    if not named:
-        raise RecipeError("name a recipe: sms3d train-policy ppo (PPO from scratch), pick_policy (the shipped "
-                          "policy's behaviour cloning) or a recipe file (docs/training.md)")
-    if len(named) > 1 and not (len(named) == 2 and named[1][0] == "--conf-file" and args.legacy_recipe == "rl"):
-        raise RecipeError(f"{' and '.join(flag for flag, _ in named)} both name a recipe; give one")
-    for flag, _ in named:
-        if flag != "RECIPE":
-            print(f"warning: {flag} is {DEPRECATION}: name the recipe first, sms3d train-policy "
-                  f"{'RECIPE_FILE' if flag == '--conf-file' else 'RECIPE'}", file=sys.stderr)
-    flag, value = named[-1]
-    recipe = default_recipe(value) if flag == "--recipe" else read_recipe(value)
-    given: list[tuple[str, str, Any]] = []  # (flag, field, value), applied in this order
-    for old, (field, _) in DEPRECATED_FIELD_FLAGS.items():
-        value = getattr(args, _dest(old))
+    retired = [flag for flag in RL_TRAINER_FLAGS if getattr(args, _dest(flag)) is not None]
+    if retired:
+        raise RecipeError(f"{', '.join(retired)}: removed in 0.2.0 with the package's own RL trainer; an RL recipe "
+                          "is an RL Baselines3 Zoo file: set the value in it (a copy of sms3d_env/recipes/ppo.yml) "
+                          "or with --hyperparams KEY=VALUE (docs/training.md)")
+    for flag, value in (("--recipe", args.legacy_recipe), ("--conf-file", args.legacy_conf_file)):
         if value is not None:
-            print(f"warning: {old} is {DEPRECATION}: set {field} in the recipe or with --hyperparams "
+            print(f"warning: {flag} is {DEPRECATION}: name the recipe first, sms3d train-policy RECIPE", file=sys.stderr)
+    name = args.recipe or args.legacy_conf_file
+    if name is None and args.legacy_recipe == "bc":
+        recipe = Recipe("bc", "the bc defaults", BCConfig())
+    elif name is None:
+        raise RecipeError("name a recipe: sms3d train-policy ppo (PPO from scratch, an RL Baselines3 Zoo file), "
+                          "pick_policy (the shipped policy's behaviour cloning) or a recipe file (docs/training.md)")
+    else:
+        recipe = read_recipe(name, args.env_id)
+    hyperparams = parse_hyperparams(args.hyperparams)
+    mine, theirs = (BC_FLAGS, RL_FLAGS) if recipe.kind == "bc" else (RL_FLAGS, [*BC_FLAGS, "overwrite"])
+    given = [f"--{d.replace('_', '-')}" for d in theirs if getattr(args, d) not in (None, False)]
+    given += [flag for flag in DEPRECATED_BC_FLAGS if recipe.kind == "rl" and getattr(args, _dest(flag)) is not None]
+    if given:
+        raise RecipeError(f"{', '.join(given)}: {'an rl' if recipe.kind == 'rl' else 'a bc'} recipe takes no "
+                          f"{'such flag' if len(given) == 1 else 'such flags'} (sms3d train-policy --help)")
+    if recipe.kind == "rl":
+        return recipe, hyperparams
+    values: dict[str, Any] = {}
+    for flag, (field, _) in DEPRECATED_BC_FLAGS.items():
+        if getattr(args, _dest(flag)) is not None:
+            print(f"warning: {flag} is {DEPRECATION}: set {field} in the recipe or with --hyperparams "
                   f"{field}=VALUE", file=sys.stderr)
-            given.append((old, field, value))
-    given += [(f"--{dest.replace('_', '-')}", field, getattr(args, dest)) for dest, field in FIELD_FLAGS.items()
-              if getattr(args, dest) is not None]
-    article = ARTICLES[recipe.kind]
-    for flag, field, value in given:
-        if field not in field_names(recipe.kind):
-            raise RecipeError(f"{flag}: {article} {recipe.kind} recipe has no {field} "
-                              f"(its fields: {', '.join(field_names(recipe.kind))})")
-        values = {field: value}
-        if field == "num_mushrooms" and recipe.kind != "bc":
-            if len(value) != 1:
-                raise RecipeError(f"{flag}: {article} {recipe.kind} recipe trains on one bed size, got {value}")
-            values[field] = value[0]
-        if field in ("pose_error_deg", "pose_error_range_deg") and recipe.kind != "bc" and value \
-                and not args.legacy_pose_source:
-            values["pose_source"] = "noisy"  # the error needs the noisy pose source
-        recipe = recipe.with_fields(values, flag)
-    return recipe.with_fields(parse_hyperparams(args.hyperparams), "--hyperparams")
+            values[field] = getattr(args, _dest(flag))
+    values.update({field: getattr(args, dest) for dest, field in {**BC_FLAGS, "out": "out", "seed": "seed"}.items()
+                   if getattr(args, dest) is not None})
+    return recipe.with_fields(values, "the command's flags").with_fields(hyperparams, "--hyperparams"), None
 
 
 def _cmd_train(args: Any) -> int:
-    removed = [flag for flag in REMOVED_FLAGS if getattr(args, _dest(flag)) is not None]
-    if removed:
-        print(f"error: {', '.join(removed)}: removed on 2026-12-06, the runs that used "
-              f"{'them' if len(removed) > 1 else 'it'} measured worse (CHANGELOG.md); sms3d-pick 0.1.0 still has "
-              f"{'them' if len(removed) > 1 else 'it'}")
-        return 2
     try:
-        recipe = _recipe_of(args)
+        recipe, hyperparams = _recipe_of(args)
     except (ValueError, FileNotFoundError) as e:  # RecipeError names the file or flag and the key
         print(f"error: {e}")
         return 2
-    if recipe.kind != "bc":
-        return _summary_or_refusal(lambda: train_policy(recipe.config, overwrite=args.overwrite))
+    if recipe.kind == "rl":
+        from sms3d_env.training.zoo import train_zoo, zoo_argv
+
+        try:
+            argv = zoo_argv(recipe.source, out=args.out or "logs", seed=args.seed or 0, hyperparams=hyperparams,
+                            **{dest: getattr(args, dest) for dest in RL_FLAGS})
+        except RecipeError as e:
+            print(f"error: {e}")
+            return 2
+        except ImportError:
+            print('error: an RL recipe runs RL Baselines3 Zoo\'s trainer: pip install "sms3d-pick[ecosystem]"')
+            return 2
+        return _summary_or_refusal(lambda: train_zoo(argv))
     from sms3d_env.training.demonstrations import DatasetError
     from sms3d_env.training.imitation import NonFiniteLossError, train_bc
 
@@ -189,60 +171,57 @@ def register(subparsers: Any) -> None:
     import argparse
 
     p = subparsers.add_parser(
-        "train-policy", help="train a pick policy from a recipe (PPO from scratch, the shipped policy's behaviour "
-                             "cloning, or a recipe file)",
+        "train-policy", help="train a pick policy from a recipe (PPO from scratch with RL Baselines3 Zoo, the "
+                             "shipped policy's behaviour cloning, or a recipe file)",
         description="Train a pick policy from a recipe: a shipped one by name (ppo: PPO from scratch on "
-                    "SMS3DPickTrain-v1; pick_policy: the shipped policy's behaviour cloning + DAgger) or a YAML "
-                    "file (an RL Baselines3 Zoo hyperparameter file, or a mapping of `recipe: rl|bc` "
-                    "and config fields; a run's config.json is one). The flags below replace the recipe's "
-                    "fields; --hyperparams replaces any other.")
+                    "SMS3DPickTrain-v2, an RL Baselines3 Zoo file; pick_policy: the shipped policy's behaviour "
+                    "cloning + DAgger) or a YAML file (an RL Baselines3 Zoo hyperparameter file, or a mapping of "
+                    "`recipe: bc` and BCConfig fields; a bc run's config.json is one). An RL recipe runs RL Zoo's "
+                    "trainer: the command prints the `python -m rl_zoo3.train` line it runs.")
     p.add_argument("recipe", nargs="?", default=None, metavar="RECIPE",
                    help="a shipped recipe (ppo, pick_policy) or a recipe file")
     p.add_argument("--out", default=None,
-                   help="run folder (model.zip, config.json, progress.csv, ...); a rerun with the same settings "
-                        "resumes it from its latest checkpoint, other settings are refused (see --overwrite)")
+                   help="rl: RL Zoo's log folder (default logs; the run goes to OUT/ALGO/ENV_N); bc: the run folder "
+                        "(model.zip, config.json, ...), which a rerun with the same settings resumes, other "
+                        "settings refused (see --overwrite)")
     p.add_argument("--overwrite", action="store_true",
-                   help="empty --out and start anew when it holds a run made with other settings")
-    p.add_argument("--seed", type=int, default=None)
-    p.add_argument("--env-id", choices=ENV_IDS, default=None, help="rl: the env to train on")
-    p.add_argument("--steps", type=int, default=None, help="rl: total env steps")
-    p.add_argument("--max-wall-s", type=float, default=None,
-                   help="rl: stop after this many seconds (after the current step)")
-    p.add_argument("--n-envs", type=int, default=None, help="rl: envs stepped together (see --vec-env)")
-    p.add_argument("--vec-env", choices=VEC_ENVS, default=None,
-                   help="rl: subproc: one worker process per env; dummy: all envs in the training "
-                        "process (no pipe round trip per step; leaves a core free)")
-    p.add_argument("--num-mushrooms", type=int, nargs="+", default=None,
-                   help="mushrooms per training bed (bc: the bed sizes its demonstrations cycle through)")
-    p.add_argument("--scene-pool", type=int, default=None,
-                   help="rl: draw training beds from a pool of this many (0: a new bed per reset)")
-    p.add_argument("--pose-error-deg", type=float, default=None,
-                   help="train under this orientation error of the pose estimate, degrees (0: exact poses)")
-    p.add_argument("--pose-error-range", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
-                   help="train under an orientation error drawn per episode in [LOW, HIGH] degrees")
-    p.add_argument("--init-model", default=None, metavar="PATH",
-                   help="rl (PPO): start from this saved model (model.zip, a checkpoint or "
-                        "best/best_model.zip; its observation statistics too) instead of a fresh policy")
-    p.add_argument("--demos", nargs="+", default=None, metavar="DATASET_ID",
-                   help="bc: clone these Minari datasets (sms3d record-demos, on SMS3DPickTrain-v1; found under "
-                        "MINARI_DATASETS_PATH) instead of recording demonstrations into --out/datasets")
+                   help="bc: empty --out and start anew when it holds a run made with other settings")
+    p.add_argument("--seed", type=int, default=None, help="default 0")
+    p.add_argument("--algo", default=None, help="rl: the algorithm (default: the recipe file's name, ppo for ppo.yml)")
+    p.add_argument("--env-id", choices=package_env_ids(), default=None,
+                   help="rl: the recipe file's entry to train (default: its first, SMS3DPickTrain-v2 in ppo)")
+    p.add_argument("--steps", type=int, default=None, help="rl: total env steps (RL Zoo's -n)")
+    p.add_argument("--n-envs", type=int, default=None, help="rl: envs stepped together")
+    p.add_argument("--vec-env", choices=("dummy", "subproc"), default=None,
+                   help="rl: dummy (RL Zoo's default): all envs in the training process; subproc: one worker "
+                        "process per env")
     p.add_argument("--eval-freq", type=int, default=None,
-                   help="rl: env steps between evaluations (0: none)")
-    p.add_argument("--eval-episodes", type=int, default=None,
-                   help="rl: episodes per periodic evaluation")
+                   help="rl: env steps between evaluations (RL Zoo's default 25000; 0: none)")
+    p.add_argument("--eval-episodes", type=int, default=None, help="rl: episodes per evaluation (RL Zoo's default 5)")
     p.add_argument("--checkpoint-freq", type=int, default=None,
-                   help="rl: env steps between checkpoints (0: none)")
+                   help="rl: env steps between checkpoints (RL Zoo's --save-freq; default none)")
+    p.add_argument("--init-model", default=None, metavar="PATH",
+                   help="rl: continue training this saved model (RL Zoo's --trained-agent)")
+    p.add_argument("--num-mushrooms", type=int, nargs="+", default=None,
+                   help="bc: the bed sizes the demonstrations cycle through")
+    p.add_argument("--pose-error-deg", type=float, default=None,
+                   help="bc: record the demonstrations under this orientation error of the pose estimate, degrees")
+    p.add_argument("--pose-error-range", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                   help="bc: under an orientation error drawn per episode in [LOW, HIGH] degrees")
+    p.add_argument("--demos", nargs="+", default=None, metavar="DATASET_ID",
+                   help="bc: clone these Minari datasets (sms3d record-demos, on SMS3DPickTrain-v2; found under "
+                        "MINARI_DATASETS_PATH) instead of recording demonstrations into --out/datasets")
     p.add_argument("--hyperparams", "--set", nargs="+", default=[], metavar="KEY=VALUE",
-                   help="replace any other field of the recipe, e.g. learning_rate=1e-4 net_arch=[64,64] "
-                        "(values read as YAML; the fields: docs/training.md; --set as in train-pose)")
+                   help="replace a recipe's setting (values read as YAML): rl: any RL Zoo hyperparameter "
+                        "(learning_rate=1e-4 policy_kwargs={net_arch: [64, 64]}); bc: any BCConfig field "
+                        "(epochs=20; the fields: docs/training.md)")
     # Deprecated flags (hidden): they still work, with a warning naming the replacement.
-    p.add_argument("--recipe", dest="legacy_recipe", choices=RECIPE_KINDS, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--recipe", dest="legacy_recipe", choices=("rl", "bc"), default=None, help=argparse.SUPPRESS)
     p.add_argument("--conf-file", dest="legacy_conf_file", default=None, help=argparse.SUPPRESS)
-    for flag, (_, kwargs) in DEPRECATED_FIELD_FLAGS.items():
+    for flag, (_, kwargs) in DEPRECATED_BC_FLAGS.items():
         p.add_argument(flag, dest=_dest(flag), default=None, help=argparse.SUPPRESS, **kwargs)
-    for flag, nargs in REMOVED_FLAGS.items():  # refused by name (_cmd_train)
-        p.add_argument(flag, dest=_dest(flag), default=None, help=argparse.SUPPRESS,
-                       **({"nargs": nargs} if nargs else {"action": "store_const", "const": True}))
+    for flag in RL_TRAINER_FLAGS:  # refused by name (_recipe_of)
+        p.add_argument(flag, dest=_dest(flag), nargs="?", const=True, default=None, help=argparse.SUPPRESS)
     p.set_defaults(func=_cmd_train)
 
     e = subparsers.add_parser("eval-policy", help="success rate (95 %% Wilson interval) of a saved policy "

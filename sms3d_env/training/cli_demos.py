@@ -7,18 +7,16 @@ import math
 from collections import Counter
 from typing import Any
 
-from sms3d_env.training.config import POSTURE_TARGETS
+from sms3d_env.training.envs import POSTURE_TARGETS, TRAIN_ENV_ID, check_bed_size, env_kwargs
 
 #: The ids the scripted picker records on: the training id (the observation the bc recipe clones)
 #: and the base id.
-RECORD_ENV_IDS = ("SMS3DPickTrain-v2", "SMS3DPick-v2", "SMS3DPickTrain-v1", "SMS3DPick-v1")
+RECORD_ENV_IDS = (TRAIN_ENV_ID, "SMS3DPick-v2", "SMS3DPickTrain-v1", "SMS3DPick-v1")
 RECORD_POSE_SOURCES = ("oracle", "noisy", "perception")
 
 
 def _check_args(args: Any) -> str | None:
     """The first argument that cannot be used, as ``argument --flag: why``; None if all can."""
-    from sms3d_env.training.config import check_bed_size
-
     for flag, value, least in (("--episodes", args.episodes, 1), ("--seed", args.seed, 0)):
         if value < least:
             return f"argument {flag}: must be an integer >= {least}, got {value}"
@@ -47,11 +45,9 @@ def _env_and_expert(args: Any, spec: Any) -> tuple[Any, Any]:
     import gymnasium as gym
 
     import sms3d_env  # noqa: F401  (registers the env ids)
-    from sms3d_env.training.imitation import train_env_kwargs
 
-    kw = train_env_kwargs(args.num_mushrooms, args.pose_error_deg,
-                          None if args.pose_error_range is None else tuple(args.pose_error_range),
-                          args.posture_target)
+    kw = env_kwargs(args.num_mushrooms, args.pose_error_deg,
+                    None if args.pose_error_range is None else tuple(args.pose_error_range), args.posture_target)
     if args.pose_source == "perception":
         kw["pose_source"] = "perception"
     if spec.kind == "scripted":

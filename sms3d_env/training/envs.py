@@ -1,39 +1,47 @@
-"""The training envs: pick envs (:func:`~sms3d_env.policies.envs.make_env`) vectorised
-(``vec_env``) and with standardised observations (``normalized``)."""
+"""The env arguments that training's recipes and commands build their envs from: one builder,
+:func:`env_kwargs`, for the behaviour-cloning recipe's demonstrations and DAgger rounds,
+``sms3d record-demos`` and ``sms3d eval-policy``. (An RL recipe writes its ``env_kwargs`` out in
+full; RL Zoo hands them to ``gym.make`` as they stand.)"""
 
 from __future__ import annotations
 
-import functools
-from pathlib import Path
 from typing import Any
 
-from sms3d_env.policies.envs import make_env
+#: The id the behaviour-cloning recipe records, clones and evaluates on.
+TRAIN_ENV_ID = "SMS3DPickTrain-v2"
+POSTURE_TARGETS = ("estimate", "tool")  # = sms3d_env.controller.POSTURE_TARGETS (kept free of mink here)
 
 
-def vec_env(kwargs: dict[str, Any], n_envs: int, seed: int, monitor_dir: str | None,
-            kind: str = "subproc", continue_monitor: bool = False) -> Any:
-    """``n_envs`` monitored envs seeded ``seed + i``: in worker processes (``kind="subproc"``,
-    when ``n_envs`` > 1) or in this process (``"dummy"``). ``continue_monitor`` (a resumed run):
-    append to the monitor files in ``monitor_dir`` where all of them exist (SB3's ``Monitor``
-    truncates them otherwise, and appends no header to a new one)."""
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+def check_bed_size(field: str, value: Any) -> None:
+    """``generator.errors.ConfigError`` (a ``ValueError``) naming ``field`` unless ``value`` is a
+    bed size the generator makes (its own range), so that a command refuses it before it writes
+    anything, not when it builds its envs."""
+    import generator
+    from generator.errors import ConfigError
 
-    append = continue_monitor and monitor_dir is not None and all(
-        (Path(monitor_dir) / f"{i}.monitor.csv").is_file() for i in range(n_envs))  # make_vec_env's names
-    return make_vec_env(functools.partial(make_env, **kwargs), n_envs=n_envs, seed=seed,
-                        monitor_dir=monitor_dir,
-                        vec_env_cls=SubprocVecEnv if n_envs > 1 and kind == "subproc" else DummyVecEnv,
-                        monitor_kwargs={"info_keywords": ("is_success", "failure_cause", "start"),
-                                        "override_existing": not append})
+    try:
+        generator.SceneConfig().replace(placement__num_mushrooms=value)
+    except ConfigError as exc:
+        raise ConfigError(field, exc.message) from None
 
 
-def normalized(env: Any, training: bool, reward_gamma: float | None = None) -> Any:
-    """Observations standardised by running statistics. Rewards as they are unless
-    ``reward_gamma`` is given: then scaled by the running standard deviation of the return
-    discounted with it (SB3's ``norm_reward``; for training only: evaluation reports true
-    returns)."""
-    from stable_baselines3.common.vec_env import VecNormalize
+def env_options(posture_target: str = "estimate") -> dict[str, Any]:
+    """The env options beyond the env id's defaults that a policy is trained (and must be run)
+    with, as JSON (a run's ``config.json`` keeps them): the controller's posture target."""
+    return {} if posture_target == "estimate" else {"controller": {"posture_target": posture_target}}
 
-    return VecNormalize(env, norm_obs=True, norm_reward=reward_gamma is not None,
-                        gamma=0.99 if reward_gamma is None else reward_gamma, training=training)
+
+def env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
+               pose_error_range_deg: tuple[float, float] | None = None,
+               posture_target: str = "estimate") -> dict[str, Any]:
+    """``gym.make`` arguments for a bed size, a pose error (0: exact poses; or drawn per episode in
+    ``pose_error_range_deg``) and the IK posture option; JSON, so that an env spec made with them
+    rebuilds the env (a Minari dataset's ``recover_environment``). The mapping form of the scene:
+    the env completes its placement."""
+    kw: dict[str, Any] = {"scene": {"placement": {"num_mushrooms": int(num_mushrooms)}},
+                          **env_options(posture_target)}
+    if pose_error_range_deg is not None:
+        kw.update(pose_source="noisy", pose_error_deg=tuple(float(v) for v in pose_error_range_deg))
+    elif pose_error_deg > 0:
+        kw.update(pose_source="noisy", pose_error_deg=float(pose_error_deg))
+    return kw

@@ -16,7 +16,7 @@ from generator.errors import ConfigError
 from sms3d_env.episode_video import EpisodeVideo
 from sms3d_env.pickers.policy import PolicyActor
 from sms3d_env.policies.loader import SHIPPED_POLICY
-from sms3d_env.training.config import TRAIN_ENV_IDS, check_bed_size, env_kwargs
+from sms3d_env.training.envs import check_bed_size, env_kwargs
 
 
 def evaluate_policy_success(model_path: str | Path | None = None, episodes: int = 30,
@@ -71,11 +71,8 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
     actor = PolicyActor(SHIPPED_POLICY if model_path is None else model_path, algo, deterministic, env_id)
     trained_on = actor.saved.get("num_mushrooms")
     num_mushrooms = num_mushrooms or (trained_on if isinstance(trained_on, int) else 25)
-    kw = env_kwargs(num_mushrooms, "noisy" if pose_error_deg > 0 else "oracle", pose_error_deg,
-                    0.0, actor.saved.get("reward_type", "dense"),
-                    max_episode_steps or actor.saved.get("max_episode_steps", 250))
-    if actor.env_id in TRAIN_ENV_IDS or "reward_type" not in actor.saved:
-        kw.pop("reward_type")  # the env id's own reward (a training id's: staged)
+    kw = {**env_kwargs(num_mushrooms, pose_error_deg),
+          "max_episode_steps": max_episode_steps or actor.saved.get("max_episode_steps", 250)}
     from sms3d_env.training.threads import torch_threads
 
     with torch_threads(1):  # per-step inference of a small MLP: more threads only add overhead

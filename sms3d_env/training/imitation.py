@@ -34,10 +34,30 @@ import numpy as np
 
 from generator.files import write_atomic
 from generator.run_folder import open_run_folder
-from sms3d_env.policies.files import finished_run, run_settings, save_model
-from sms3d_env.training.config import POSTURE_TARGETS, check_bed_size, env_options
+from sms3d_env.policies.files import PolicyFileError, parse_json, read_run_text, save_model
+from sms3d_env.training.envs import (
+    POSTURE_TARGETS,
+    TRAIN_ENV_ID,
+    check_bed_size,
+    env_kwargs,
+    env_options,
+)
 
-TRAIN_ENV_ID = "SMS3DPickTrain-v2"
+
+def finished_run(folder: Path) -> dict[str, Any] | None:
+    """The summary of the finished run in ``folder``, after saying so: its ``summary.json`` (the
+    last file a run writes); None when there is none."""
+    path = folder / "summary.json"
+    if not path.is_file():
+        return None
+    try:
+        summary = parse_json(read_run_text(path, "run summary"), path, "run summary")
+        if not isinstance(summary, dict):
+            raise PolicyFileError(path, "not a readable run summary (no JSON object)")
+    except PolicyFileError as exc:
+        raise PolicyFileError(path, f"{exc.message}; --overwrite to start the run anew") from None
+    print(f"{folder} is complete ({path.name}); nothing to do (--overwrite to start it anew)")
+    return summary
 
 
 class NonFiniteLossError(RuntimeError):
@@ -151,21 +171,6 @@ class BCConfig:
 RECORDING_FIELDS = ("episodes", "num_mushrooms", "action_noise", "pose_error_deg", "pose_error_range_deg")
 
 
-def train_env_kwargs(num_mushrooms: int, pose_error_deg: float = 0.0,
-                     pose_error_range_deg: tuple[float, float] | None = None,
-                     posture_target: str = "estimate") -> dict[str, Any]:
-    """``gym.make(TRAIN_ENV_ID, **kwargs)`` arguments for a bed size and pose error (fixed, or
-    drawn per episode in ``pose_error_range_deg``) and the IK posture option; JSON, so that an
-    env spec made with them rebuilds the env (a Minari dataset's ``recover_environment``)."""
-    kw: dict[str, Any] = {"scene": {"placement": {"num_mushrooms": int(num_mushrooms)}},
-                          **env_options(posture_target)}
-    if pose_error_range_deg is not None:
-        kw.update(pose_source="noisy", pose_error_deg=tuple(float(v) for v in pose_error_range_deg))
-    elif pose_error_deg > 0:
-        kw.update(pose_source="noisy", pose_error_deg=float(pose_error_deg))
-    return kw
-
-
 def _record(cfg: BCConfig, targets: list[tuple[str, Any]], seeds: range, actor: Any = None, beta: float = 1.0,
             desc: str = "demonstrations", progress: bool = True) -> list[Any]:
     """Episodes ``seeds`` labelled by the scripted picker into new datasets ``targets`` (``(id,
@@ -224,7 +229,7 @@ def own_demos(cfg: BCConfig, root: Path, progress: bool = True) -> list[Any]:
     ids = [f"bc/demos-{k}-v0" for k in range(len(cfg.num_mushrooms))]
     with minari_root(root):
         return _reuse_or_record(ids, lambda: _record(
-            cfg, [(i, gym.make(TRAIN_ENV_ID, **train_env_kwargs(n, cfg.pose_error_deg, cfg.pose_error_range_deg,
+            cfg, [(i, gym.make(TRAIN_ENV_ID, **env_kwargs(n, cfg.pose_error_deg, cfg.pose_error_range_deg,
                                                                 cfg.posture_target)))
                   for i, n in zip(ids, cfg.num_mushrooms, strict=True)],
             range(cfg.seed, cfg.seed + cfg.episodes), progress=progress))
@@ -326,7 +331,9 @@ def train_bc(cfg: BCConfig, progress: bool = True, overwrite: bool = False) -> d
     from sms3d_env.training.threads import torch_threads
 
     demo_sets = given_demos(cfg)
-    run = open_run_folder(cfg.out, run_settings(asdict(cfg)), overwrite=overwrite, may_change=("torch_threads",))
+    # The run's settings: its configuration but out, the folder itself (a run moved elsewhere resumes there).
+    settings = {k: v for k, v in asdict(cfg).items() if k != "out"}
+    run = open_run_folder(cfg.out, settings, overwrite=overwrite, may_change=("torch_threads",))
     with run:  # holds the folder's lock until the run ends
         out = run.path
         root = out / "datasets"
@@ -340,7 +347,7 @@ def train_bc(cfg: BCConfig, progress: bool = True, overwrite: bool = False) -> d
         with torch_threads(cfg.torch_threads):
             t0 = time.perf_counter()
             demo_sets = demo_sets or own_demos(cfg, root, progress)
-            env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(cfg.num_mushrooms[0], posture_target=cfg.posture_target))
+            env = gym.make(TRAIN_ENV_ID, **env_kwargs(cfg.num_mushrooms[0], posture_target=cfg.posture_target))
             keys = list(env.observation_space.spaces)
             demos = labelled_steps(demo_sets, keys)
             t_demo = time.perf_counter() - t0

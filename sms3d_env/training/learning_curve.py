@@ -1,5 +1,7 @@
-"""Learning curves of ``sms3d train-policy`` runs: the periodic evaluation's success rate against
-env steps and wall time, read from each run's ``progress.csv`` (SB3's CSV logger).
+"""Learning curves of RL runs: the periodic evaluation's success rate against env steps and wall
+time, read from an RL Zoo run's ``evaluations.npz`` and monitor files (``sms3d train-policy`` on
+an RL recipe, ``python -m rl_zoo3.train``), or from the ``progress.csv`` (SB3's CSV logger) of a
+run of the package's RL trainer before 0.2.0.
 
 ``sms3d learning-curve RUN [RUN ...] --out curve.png`` draws them side by side (one line per run,
 e.g. one per training seed) and prints the table. A run started from a checkpoint of another
@@ -18,20 +20,46 @@ from typing import Any
 from sms3d_env.policies.loader import checkpoint_steps
 
 EVAL_COLUMN, STEPS_COLUMN, WALL_COLUMN = "eval/success_rate", "time/total_timesteps", "time/time_elapsed"
-SHARE_COLUMN = "curriculum/pregrasp_start"  # written by --pregrasp-anneal
+SHARE_COLUMN = "curriculum/pregrasp_start"  # written by the curriculum's annealing
+ZOO_EVALUATIONS = "evaluations.npz"  # RL Zoo's EvalCallback's, in the run folder
+
+
+def _zoo_curve(run: Path) -> list[dict[str, float]]:
+    """An RL Zoo run's evaluations (``timesteps`` and per-episode ``successes``), each at the wall
+    time when the first training env's monitor file (``0.monitor.csv``; the envs step together)
+    had reached its share of those steps, to within one episode; no curriculum share."""
+    import numpy as np
+
+    with np.load(run / ZOO_EVALUATIONS, allow_pickle=False) as z:
+        if "successes" not in z.files or not len(z["timesteps"]):
+            raise ValueError(f"{run / ZOO_EVALUATIONS}: no evaluation with successes")
+        steps, success = z["timesteps"], np.asarray(z["successes"], float).mean(axis=1)
+    monitors = sorted(run.glob("*.monitor.csv"))
+    if not monitors:
+        raise FileNotFoundError(f"{run}: no monitor files beside {ZOO_EVALUATIONS}")
+    with open(run / "0.monitor.csv", newline="") as f:
+        next(f)  # the JSON header line
+        episodes = [(float(r["l"]), float(r["t"])) for r in csv.DictReader(f)]
+    ends = np.cumsum([length for length, _ in episodes]) * len(monitors)
+    walls = [t for _, t in episodes]
+    return [{"steps": float(s), "success": float(p), "pregrasp_start": math.nan,
+             "wall_s": walls[min(int(np.searchsorted(ends, s)), len(walls) - 1)] if walls else math.nan}
+            for s, p in zip(steps, success, strict=True)]
 
 
 def read_curve(run: str | Path) -> list[dict[str, float]]:
     """``[{"steps", "wall_s", "success", "pregrasp_start"}]`` per periodic evaluation of a run
     folder, in order.
 
-    SB3 writes the evaluation and the rollout statistics on separate rows; the wall time and the
-    annealed curriculum share (NaN for a run without ``--pregrasp-anneal``) of an evaluation row
-    are the latest ones logged before it (FileNotFoundError / ValueError name the file when it is
-    missing or has no evaluation)."""
+    An RL Zoo run's come from :func:`_zoo_curve`. In a ``progress.csv``, SB3 writes the evaluation
+    and the rollout statistics on separate rows; the wall time and the annealed curriculum share
+    (NaN for a run without one) of an evaluation row are the latest ones logged before it
+    (FileNotFoundError / ValueError name the file when it is missing or has no evaluation)."""
     path = Path(run) / "progress.csv"
+    if (Path(run) / ZOO_EVALUATIONS).is_file() and not path.is_file():
+        return _zoo_curve(Path(run))
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no progress.csv (is {run} a train-policy run folder?)")
+        raise FileNotFoundError(f"{run}: neither {ZOO_EVALUATIONS} nor progress.csv (an RL run's folder?)")
     points: list[dict[str, float]] = []
     wall = share = math.nan
     with open(path, newline="") as f:
@@ -134,7 +162,7 @@ def _cmd(args: Any) -> int:
 
 def register(subparsers: Any) -> None:
     """Add ``sms3d learning-curve``."""
-    p = subparsers.add_parser("learning-curve", help="success of train-policy runs against env steps and wall time")
-    p.add_argument("runs", nargs="+", help="train-policy run folders (each with progress.csv)")
+    p = subparsers.add_parser("learning-curve", help="success of RL runs against env steps and wall time")
+    p.add_argument("runs", nargs="+", help="RL run folders (RL Zoo's OUT/ALGO/ENV_N, or one with progress.csv)")
     p.add_argument("--out", required=True, help="PNG to write")
     p.set_defaults(func=_cmd)

@@ -1,4 +1,6 @@
-"""Schedules for runs that a wall-clock limit may stop before their last step: the learning rate.
+"""Schedules for runs that a wall-clock limit may stop before their last step: the learning rate
+(:func:`falling_learning_rate`) and the limit itself (:func:`wall_clock_limit`), both SB3
+callbacks that an RL recipe names.
 
 SB3 drives a schedule by ``progress_remaining``, the share of ``total_steps`` still to run. A run
 stopped by ``max_wall_s`` never sees the end of that schedule: measured, a rate meant to fall
@@ -68,9 +70,8 @@ def falling_rate(start: float, end: float, max_wall_s: float | None = None) -> C
 def falling_learning_rate(final: float, max_wall_s: float | None = None) -> Any:
     """An SB3 callback: from the start of training, the model's learning rate falls linearly
     from its initial value to ``final`` (:func:`falling_rate`, over the steps or with
-    ``max_wall_s`` whichever ends first): the schedule of ``sms3d train-policy
-    --learning-rate-final`` (``--learning-rate-by-wall``), for recipes that cannot build it into
-    the model, such as an RL Zoo hyperparameter file (whose ``lin_`` rates fall to 0)."""
+    ``max_wall_s`` whichever ends first): a schedule that an RL Zoo hyperparameter file cannot
+    write (its ``lin_`` rates fall to 0)."""
     from stable_baselines3.common.callbacks import BaseCallback
 
     class _FallingLearningRate(BaseCallback):
@@ -84,3 +85,17 @@ def falling_learning_rate(final: float, max_wall_s: float | None = None) -> Any:
 
     return _FallingLearningRate()
 
+
+
+def wall_clock_limit(max_wall_s: float) -> Any:
+    """An SB3 callback that stops training once ``max_wall_s`` seconds have passed since it began."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _StopAfter(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.t0 = time.perf_counter()
+
+        def _on_step(self) -> bool:
+            return time.perf_counter() - self.t0 < max_wall_s
+
+    return _StopAfter()

@@ -1,42 +1,38 @@
-"""RL Baselines3 Zoo (``rl_zoo3``) and this package: the shipped RL recipes are RL Zoo
-hyperparameter files (``sms3d_env/recipes/<name>.yml``) that ``sms3d train-policy RECIPE``
-reads too (:func:`recipe_fields`), and a model that ``python -m rl_zoo3.train`` saved runs as a
-picker (:func:`zoo_run_of`, used by :class:`~sms3d_env.training.actor.PolicyActor`).
+"""RL recipes run by RL Baselines3 Zoo's trainer: ``sms3d train-policy RECIPE`` on an RL recipe is a
+thin front to ``python -m rl_zoo3.train``.
 
-A zoo run folder (``logs/ppo/SMS3DPickTrain-v1_1/``) holds the model (``SMS3DPickTrain-v1.zip``,
-``best_model.zip``, ``rl_model_<N>_steps.zip``) and a folder named after the env with
-``args.yml`` (the command's arguments), ``config.yml`` (the hyperparameters) and, for a
-normalised run, ``vecnormalize.pkl``. The YAML files carry one Python tag (an ``OrderedDict``),
-read as a plain mapping; every other tag is refused. ``vecnormalize.pkl`` is a pickle of SB3's
-``VecNormalize``: it is decoded by a restricted reader (:func:`read_vecnormalize`) that imports
-and calls no class or function named in the file besides numpy's array and dtype constructors;
-every other object becomes an inert record of its state, from which the running means and
-variances are taken. The model zip's pickled entries are not unpickled either: its policy is
-built from the run's algorithm and policy name, the spaces of the env it names and the zip's
-readable ``policy_kwargs`` (:meth:`ZooRun.policy_spec`, loaded by
-:func:`~sms3d_env.training.actor.load_sb3`). No code from a zoo run's files runs here.
+An RL recipe is an RL Zoo hyperparameter file keyed by env id (``sms3d_env/recipes/ppo.yml``),
+which RL Zoo reads as it stands: its ``env_kwargs`` reach ``gym.make`` as the file writes them,
+and its ``callback:`` names the package's callbacks (:mod:`~sms3d_env.training.curriculum`,
+:mod:`~sms3d_env.training.schedules`). :func:`zoo_argv` turns the command's flags into RL Zoo's
+command line, :func:`train_zoo` prints that command and runs RL Zoo's own ``train()`` on it, so
+the same command typed by hand makes the same run (``args.yml`` and ``config.yml`` record the
+same settings). RL Zoo writes the run into ``OUT/ALGO/ENV_N/`` (:mod:`sms3d_env.policies.zoo_runs`
+reads it); a rerun makes ``ENV_N+1``.
+
+What the front adds to RL Zoo's defaults, each visible in the printed command: the package's env
+ids (``--gym-packages sms3d_env``), seed 0 unless given, one torch thread (the policy's per-step
+forward pass is tiny; 2 threads beside the env made it ~50x slower here) on the CPU, and the
+periodic evaluation's env (:func:`evaluation_env_kwargs`: fresh beds, every episode from home).
 """
 
 from __future__ import annotations
 
+import contextlib
+import shlex
+import sys
 from pathlib import Path
 from typing import Any
 
 from generator.config_file import shipped_or_file
-from sms3d_env.env_args import translate_legacy_options
-from sms3d_env.policies.zoo_runs import FLATTEN_WRAPPER, zoo_yaml_or_why
+from sms3d_env.policies.files import PolicyFileError
+from sms3d_env.policies.zoo_runs import zoo_yaml_or_why
 
 #: The shipped recipes: ``sms3d_env/recipes/<name>.yml``.
 RECIPES_DIR = Path(__file__).parents[1] / "recipes"
-#: Callbacks a recipe may name (RL Zoo's ``callback:``), each for a ``TrainConfig`` setting.
-PREGRASP_ANNEALING = "sms3d_env.training.curriculum.pregrasp_annealing"
-FALLING_LEARNING_RATE = "sms3d_env.training.schedules.falling_learning_rate"
-WALL_CLOCK_LIMIT = "sms3d_env.training.rl.wall_clock_limit"
-#: Recipe keys that are ``TrainConfig`` fields of the same name.
-SAME_NAME_KEYS = ("n_envs", "n_steps", "batch_size", "gamma", "learning_rate", "target_kl", "buffer_size",
-                  "learning_starts")
-#: ``env_kwargs`` entries that are ``TrainConfig`` fields of the same name.
-SAME_NAME_ENV_KWARGS = ("pose_source", "reward_type")
+#: What the front passes RL Zoo unless the command says otherwise (see the module's docstring).
+FRONT_DEFAULTS = ("--gym-packages", "sms3d_env", "--num-threads", "1", "--device", "cpu")
+
 
 class RecipeError(ValueError):
     """A recipe file that ``sms3d train-policy`` cannot follow; the message names the file and key."""
@@ -49,162 +45,108 @@ def recipe_path(name_or_path: str | Path) -> Path:
 
 
 def read_zoo_yaml(path: Path) -> dict[str, Any]:
-    """An RL Zoo YAML file (a recipe, ``config.yml``, ``args.yml``) as a mapping; ``RecipeError``
-    naming the file when it is not readable YAML of a mapping (:func:`~sms3d_env.policies.zoo_runs.zoo_yaml_or_why`)."""
+    """A recipe file as a mapping (safe YAML: RL Zoo's one ``OrderedDict`` tag, no other);
+    ``RecipeError`` naming the file when it is not readable YAML of a mapping."""
     data, why = zoo_yaml_or_why(path)
     if data is None:
         raise RecipeError(f"{path}: {why}")
     return data
 
 
-def _callbacks(path: Path, value: Any) -> dict[str, dict[str, Any]]:
-    """A recipe's ``callback:`` (one name, or a list of names or ``{name: kwargs}``) by name."""
-    items = value if isinstance(value, list) else [value]
-    out: dict[str, dict[str, Any]] = {}
-    for item in items:
-        name, kwargs = (next(iter(item.items())) if isinstance(item, dict) and len(item) == 1 else (item, {}))
-        if not isinstance(name, str) or not isinstance(kwargs, dict):
-            raise RecipeError(f"{path}: callback: each entry must be a name or {{name: {{keyword: value}}}}, got {item!r}")
-        out[name] = kwargs
-    return out
-
-
-def _scene_fields(scene: Any, bad: Any) -> dict[str, Any]:
-    """The ``TrainConfig`` fields of a recipe's ``env_kwargs.scene``: ``{"placement":
-    {"num_mushrooms": N}}`` (a ``SceneConfig``'s mapping form) or ``{"config": that, "pool": P}``
-    (a ``SceneSourceConfig``'s); ``bad(key, why)`` makes the error for anything else."""
-    source = scene if isinstance(scene, dict) and set(scene) & {"config", "pool"} else {"config": scene}
-    config = source.get("config")
-    placement = config.get("placement") if isinstance(config, dict) and set(config) == {"placement"} else None
-    if set(source) - {"config", "pool"} or not (isinstance(placement, dict) and set(placement) == {"num_mushrooms"}):
-        raise bad("env_kwargs.scene", f"TrainConfig sets config.placement.num_mushrooms and pool only, got {scene!r}")
-    return {"num_mushrooms": placement["num_mushrooms"], **({"scene_pool": source["pool"]} if "pool" in source else {})}
-
-
-def recipe_fields(path: Path, env_id: str | None = None) -> tuple[str, dict[str, Any]]:
-    """``(env_id, fields)``: the ``TrainConfig`` fields that the recipe file's entry for ``env_id``
-    (``None``: its only entry) sets. Every key must be one that maps onto a field, read the same
-    way RL Zoo reads it (``n_timesteps`` is ``total_steps``, ``normalize`` a mapping of
-    ``norm_obs``/``norm_reward``, ``env_kwargs.scene`` is ``num_mushrooms`` (its
-    ``config.placement.num_mushrooms``) and ``scene_pool`` (its ``pool``), ``env_kwargs.start.share``
-    is ``pregrasp_start``, ``env_kwargs.controller.posture_target`` is ``posture_target``,
-    ``env_kwargs.pose_error_deg`` a (low, high) pair is ``pose_error_range_deg``, the three
-    callbacks of this package are ``pregrasp_anneal``, ``learning_rate_final`` (+
-    ``learning_rate_by_wall``) and ``max_wall_s``); anything else is a ``RecipeError`` naming the
-    file and the key. Env arguments of earlier versions (``scene_config``, ``scene_pool``,
-    ``pregrasp_start``, ...) are read as :func:`~sms3d_env.env_args.translate_legacy_options`
-    reads them."""
+def recipe_entry(path: Path, env_id: str | None = None) -> tuple[str, dict[str, Any]]:
+    """``(env_id, entry)``: the recipe file's hyperparameters for ``env_id`` (``None``: its first
+    entry), as RL Zoo picks them; ``RecipeError`` naming the file when there is no such entry."""
     data = read_zoo_yaml(path)
-    if env_id is None:
-        if len(data) != 1:
-            raise RecipeError(f"{path}: holds entries for {sorted(data)}; name one with --env-id")
-        env_id = next(iter(data))
-    if env_id not in data or not isinstance(data[env_id], dict):
+    env_id = next(iter(data), None) if env_id is None else env_id
+    if not isinstance(data.get(env_id), dict):
         raise RecipeError(f"{path}: no entry for {env_id} (entries: {sorted(data)})")
-    entry = dict(data[env_id])
-    out: dict[str, Any] = {"env_id": env_id}
-
-    def bad(key: str, why: str) -> RecipeError:
-        return RecipeError(f"{path}: {env_id}.{key}: {why}")
-
-    for key in SAME_NAME_KEYS:
-        if key in entry:
-            value = entry.pop(key)
-            if key == "learning_rate" and not isinstance(value, (int, float)):
-                raise bad(key, f"must be a number, got {value!r} (RL Zoo's lin_ rates fall to 0; a rate that "
-                               f"falls to another value is the callback {FALLING_LEARNING_RATE})")
-            out[key] = value
-    if "n_timesteps" in entry:
-        out["total_steps"] = int(float(entry.pop("n_timesteps")))
-    wrappers = entry.pop("env_wrapper", None)
-    wrappers = [] if wrappers is None else wrappers if isinstance(wrappers, list) else [wrappers]
-    if any(w != FLATTEN_WRAPPER for w in wrappers):
-        raise bad("env_wrapper", f"the one wrapper supported is {FLATTEN_WRAPPER}, got {wrappers}")
-    out["flat_observation"] = bool(wrappers)
-    policy = entry.pop("policy", "MlpPolicy" if wrappers else "MultiInputPolicy")
-    if policy != ("MlpPolicy" if wrappers else "MultiInputPolicy"):
-        raise bad("policy", f"must be MlpPolicy with {FLATTEN_WRAPPER}, MultiInputPolicy without, got {policy!r}")
-    if "normalize" in entry:
-        norm = entry.pop("normalize")
-        if isinstance(norm, bool):
-            norm = {"norm_obs": norm, "norm_reward": norm}
-        if not isinstance(norm, dict) or set(norm) - {"norm_obs", "norm_reward", "gamma"} \
-                or not norm.get("norm_obs", True):
-            raise bad("normalize", f"must be a bool or a mapping of norm_obs (true) and norm_reward, got {norm!r} "
-                                   "(a string would be evaluated as Python)")
-        out["normalize"], out["normalize_reward"] = True, bool(norm.get("norm_reward", True))
-    kwargs = entry.pop("policy_kwargs", {})
-    if not isinstance(kwargs, dict) or set(kwargs) - {"net_arch", "log_std_init"}:
-        raise bad("policy_kwargs", f"must be a mapping of net_arch and log_std_init, got {kwargs!r} "
-                                   "(a string would be evaluated as Python)")
-    if "net_arch" in kwargs:
-        out["net_arch"] = tuple(kwargs["net_arch"])
-    if "log_std_init" in kwargs:
-        out["log_std_init"] = kwargs["log_std_init"]
-    try:
-        env_kwargs = translate_legacy_options(dict(entry.pop("env_kwargs", None) or {}))
-    except ValueError as exc:
-        raise bad("env_kwargs", str(exc)) from None
-    if "scene" in env_kwargs:
-        out.update(_scene_fields(env_kwargs.pop("scene"), bad))
-    for key, field in (("start", "share"), ("controller", "posture_target")):
-        if key in env_kwargs:
-            value = env_kwargs.pop(key)
-            if not (isinstance(value, dict) and set(value) == {field}):
-                raise bad(f"env_kwargs.{key}", f"TrainConfig sets {key}.{field} only, got {value!r}")
-            out["pregrasp_start" if key == "start" else field] = value[field]
-    for key in SAME_NAME_ENV_KWARGS:
-        if key in env_kwargs:
-            out[key] = env_kwargs.pop(key)
-    if "pose_error_deg" in env_kwargs:
-        error = env_kwargs.pop("pose_error_deg")
-        out["pose_error_range_deg" if isinstance(error, list) else "pose_error_deg"] = (
-            tuple(error) if isinstance(error, list) else error)
-    if env_kwargs:
-        raise bad("env_kwargs", f"no TrainConfig field for {sorted(env_kwargs)}")
-    callbacks = _callbacks(path, entry.pop("callback", []))
-    if PREGRASP_ANNEALING in callbacks:
-        initial = callbacks.pop(PREGRASP_ANNEALING).get("initial")
-        if initial != out.get("pregrasp_start"):
-            raise bad("callback", f"{PREGRASP_ANNEALING} anneals from env_kwargs.start.share "
-                                  f"({out.get('pregrasp_start')}); its initial must be the same, got {initial!r}")
-        out["pregrasp_anneal"] = True
-    walls = {}
-    if FALLING_LEARNING_RATE in callbacks:
-        rate = callbacks.pop(FALLING_LEARNING_RATE)
-        out["learning_rate_final"] = rate.get("final")
-        if rate.get("max_wall_s") is not None:
-            out["learning_rate_by_wall"], walls["rate"] = True, rate["max_wall_s"]
-    if WALL_CLOCK_LIMIT in callbacks:
-        out["max_wall_s"] = walls["stop"] = callbacks.pop(WALL_CLOCK_LIMIT).get("max_wall_s")
-    if len(set(walls.values())) > 1 or ("rate" in walls and "stop" not in walls):
-        raise bad("callback", f"the falling rate's max_wall_s must be {WALL_CLOCK_LIMIT}'s, got {walls}")
-    if callbacks:
-        raise bad("callback", f"no TrainConfig setting for {sorted(callbacks)} (supported: {PREGRASP_ANNEALING}, "
-                              f"{FALLING_LEARNING_RATE}, {WALL_CLOCK_LIMIT})")
-    if entry:
-        raise bad(", ".join(sorted(entry)), "no TrainConfig field for these keys")
-    return env_id, out
+    return env_id, data[env_id]
 
 
-def with_recipe(cfg: Any, recipe: str | Path) -> Any:
-    """Deprecated (2026-12-06), removed after 2027-06-06: use ``read_recipe(recipe).config``.
+def evaluation_env_kwargs(env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The periodic evaluation's env arguments for a recipe's ``env_kwargs``: the same, but fresh
+    beds instead of a pool (``scene``'s ``config``) and every episode from home (no ``start``)."""
+    kwargs = {k: v for k, v in env_kwargs.items() if k != "start"}
+    scene = kwargs.get("scene")
+    if isinstance(scene, dict) and "pool" in scene:
+        kwargs["scene"] = scene.get("config") or {}
+    return kwargs
 
-    ``cfg`` (a ``TrainConfig``) with the fields that ``recipe`` (a file, or a shipped recipe's
-    name) sets; its entry is ``cfg.env_id``'s when the file has one, else its only one. A field
-    that ``cfg`` sets to neither its default nor the recipe's value is a ``RecipeError`` (a flag
-    given beside the file); the result is validated as any ``TrainConfig``."""
-    import warnings
-    from dataclasses import replace
 
-    warnings.warn("sms3d_env.training.with_recipe is deprecated on 2026-12-06 and removed after 2027-06-06: use "
-                  "sms3d_env.training.read_recipe(recipe).config, whose fields replace one another by "
-                  "Recipe.with_fields", DeprecationWarning, stacklevel=2)
+def _store_dict(values: dict[str, Any]) -> list[str]:
+    """``{"scene": {...}}`` as RL Zoo's ``KEY:VALUE`` arguments (it evaluates each value as Python)."""
+    return [f"{key}:{value!r}" for key, value in values.items()]
+
+
+def zoo_argv(recipe: str | Path, *, out: str = "logs", seed: int = 0, algo: str | None = None,
+             env_id: str | None = None, steps: int | None = None, n_envs: int | None = None,
+             vec_env: str | None = None, eval_freq: int | None = None, eval_episodes: int | None = None,
+             checkpoint_freq: int | None = None, init_model: str | None = None,
+             hyperparams: dict[str, Any] | None = None) -> list[str]:
+    """The ``python -m rl_zoo3.train`` arguments of ``sms3d train-policy RECIPE`` with these flags:
+    ``--algo`` the recipe file's name where it names an algorithm (RL Zoo's own files are
+    ``ppo.yml``, ``sac.yml``), ``--env`` its first entry's id, ``--hyperparams`` ``hyperparams``
+    (values as Python literals) and ``n_envs``; the rest as RL Zoo's flags of those names."""
+    from rl_zoo3.utils import ALGOS
+
     path = recipe_path(recipe)
-    defaults = type(cfg)()
-    env_ids = read_zoo_yaml(path)
-    env_id, values = recipe_fields(path, cfg.env_id if cfg.env_id in env_ids else None)
-    clash = sorted(k for k, v in values.items() if getattr(cfg, k) not in (getattr(defaults, k), v))
-    if clash:
-        raise RecipeError(f"{path} sets {clash}; leave out the flags that set them too")
-    return replace(cfg, **values)
+    if (algo or path.stem) not in ALGOS:
+        known = ", ".join(sorted(ALGOS))
+        raise RecipeError(f"--algo {algo}: not an RL Zoo algorithm ({known})" if algo else
+                          f"{path}: its name is no RL Zoo algorithm ({known}); give --algo")
+    algo = algo or path.stem
+    env_id, entry = recipe_entry(path, env_id)
+    params = {**({"n_envs": n_envs} if n_envs is not None else {}), **(hyperparams or {})}
+    argv = ["--algo", algo, "--env", env_id, "--conf-file", str(path), *FRONT_DEFAULTS, "--seed", str(seed),
+            "--log-folder", str(out)]
+    for flag, value in (("-n", steps), ("--vec-env", vec_env), ("--eval-freq", eval_freq),
+                        ("--eval-episodes", eval_episodes), ("--save-freq", checkpoint_freq),
+                        ("--trained-agent", init_model)):
+        if value is not None:
+            argv += [flag, str(value)]
+    if params:
+        argv += ["--hyperparams", *_store_dict(params)]
+    env_kwargs = params.get("env_kwargs", entry.get("env_kwargs")) or {}
+    if evaluation_env_kwargs(env_kwargs) != env_kwargs:
+        argv += ["--eval-env-kwargs", *_store_dict(evaluation_env_kwargs(env_kwargs))]
+    return argv
+
+
+def zoo_command(argv: list[str]) -> str:
+    """``argv`` as the shell command that runs it (a Python literal in double quotes where that
+    quotes it, else as ``shlex`` quotes it)."""
+    def quoted(arg: str) -> str:
+        return arg if shlex.quote(arg) == arg else f'"{arg}"' if not set(arg) & set('"$`\\!') else shlex.quote(arg)
+
+    return " ".join(["python", "-m", "rl_zoo3.train", *map(quoted, argv)])
+
+
+def _value(argv: list[str], flag: str) -> str:
+    return argv[argv.index(flag) + 1]
+
+
+def _run_folder(argv: list[str]) -> Path:
+    """The folder RL Zoo saves the run of ``argv`` in next: ``LOG_FOLDER/ALGO/ENV_<N+1>``."""
+    from rl_zoo3.utils import get_latest_run_id
+
+    folder, env_id = Path(_value(argv, "--log-folder")) / _value(argv, "--algo"), _value(argv, "--env")
+    return folder / f"{env_id}_{get_latest_run_id(str(folder), env_id) + 1}"
+
+
+def train_zoo(argv: list[str]) -> dict[str, Any]:
+    """Print the RL Zoo command of ``argv`` and run RL Zoo's ``train()`` on it in this process;
+    returns ``{"command", "run", "model"}``. A ``--trained-agent`` that is no file is refused
+    first (``PolicyFileError``), as RL Zoo would only assert it."""
+    from rl_zoo3.train import train
+
+    if "--trained-agent" in argv:
+        agent = Path(_value(argv, "--trained-agent"))
+        if not agent.is_file() or agent.suffix != ".zip":
+            raise PolicyFileError(agent, "no saved model (.zip) to start from")
+    command, run = zoo_command(argv), _run_folder(argv)
+    print(command, flush=True)
+    with contextlib.ExitStack() as stack:
+        stack.callback(setattr, sys, "argv", sys.argv)
+        sys.argv = ["rl_zoo3.train", *argv]
+        train()
+    return {"command": command, "run": str(run), "model": str(run / f"{_value(argv, '--env')}.zip")}

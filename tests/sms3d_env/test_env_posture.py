@@ -10,7 +10,7 @@ import pytest
 
 import sms3d_env  # noqa: F401  (registers the env ids)
 from sms3d_env.controller import POSTURE_TARGETS
-from sms3d_env.training import config as training_config
+from sms3d_env.training import envs as training_envs
 from sms3d_env.training import imitation
 
 
@@ -45,7 +45,7 @@ def test_a_bad_posture_target_is_refused_by_name():
 
 
 def test_the_training_recipes_know_the_same_posture_targets():
-    assert training_config.POSTURE_TARGETS == POSTURE_TARGETS
+    assert training_envs.POSTURE_TARGETS == POSTURE_TARGETS
     assert imitation.env_options("tool") == {"controller": {"posture_target": "tool"}}
     assert imitation.env_options() == {}
 

@@ -23,13 +23,13 @@ from sms3d_env.pickers.episode import run_episode
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.pose_sources import UniformNoisyPose
 from sms3d_env.training.demonstrations import DatasetError, datasets_root, labelled_steps
+from sms3d_env.training.envs import env_kwargs
 from sms3d_env.training.imitation import (
     BCConfig,
     NonFiniteLossError,
     behaviour_clone,
     build_policy_model,
     train_bc,
-    train_env_kwargs,
 )
 
 DATASET = "sms3d/pick-v2/scripted-v0"
@@ -52,7 +52,7 @@ def test_the_dataset_holds_the_pickers_own_episodes(minari_root):
     dataset = minari.load_dataset(DATASET)
     assert dataset.total_episodes == 3
     outcomes = list(dataset.storage.get_episode_metadata(dataset.episode_indices))
-    env = gym.make("SMS3DPickTrain-v2", **train_env_kwargs(BED))
+    env = gym.make("SMS3DPickTrain-v2", **env_kwargs(BED))
     try:
         plain = [run_episode(env, ScriptedPicker.for_env(env), seed) for seed in SEEDS]
     finally:
@@ -171,7 +171,7 @@ def test_bc_refuses_a_dataset_holding_nan_before_training(minari_root, tmp_path,
 def test_a_loss_that_becomes_nan_stops_behaviour_cloning_before_the_weights(minari_root):
     import torch as th
 
-    env = gym.make("SMS3DPickTrain-v2", **train_env_kwargs(BED))
+    env = gym.make("SMS3DPickTrain-v2", **env_kwargs(BED))
     try:
         keys = list(env.observation_space.spaces)
         demos = labelled_steps([minari.load_dataset(DATASET)], keys)

@@ -1,4 +1,4 @@
-"""The start-state curriculum that follows home-start success (``--pregrasp-anneal``)."""
+"""The start-state curriculum that follows home-start success (the PPO recipe's ``pregrasp_annealing`` callback)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 from stable_baselines3.common.logger import Logger
 
-from sms3d_env.training.config import TrainConfig
 from sms3d_env.training.curriculum import (
     HOME_WINDOW,
     MIN_HOME_EPISODES,
@@ -60,10 +59,3 @@ def test_only_finished_home_starts_move_the_share():
     cb.on_rollout_end()
     assert envs.calls[-1] == ("set_pregrasp_start", pytest.approx(0.8))
 
-
-def test_annealing_needs_a_curriculum_share():
-    with pytest.raises(ValueError, match="TrainConfig.pregrasp_anneal"):
-        TrainConfig(pregrasp_anneal=True)
-    with pytest.raises(ValueError, match="TrainConfig.pregrasp_anneal"):
-        TrainConfig(pregrasp_start=0.5, pregrasp_anneal=1)  # type: ignore[arg-type]
-    assert TrainConfig(pregrasp_start=0.5, pregrasp_anneal=True).env_kwargs()["start"].share == 0.5

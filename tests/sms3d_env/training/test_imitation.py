@@ -13,7 +13,8 @@ import sms3d_env  # noqa: F401  (registers the env ids)
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.pose_sources import UniformNoisyPose
 from sms3d_env.training.demonstrations import labelled_steps, minari_root, with_true_target
-from sms3d_env.training.imitation import TRAIN_ENV_ID, BCConfig, _record, train_env_kwargs
+from sms3d_env.training.envs import TRAIN_ENV_ID, env_kwargs
+from sms3d_env.training.imitation import BCConfig, _record
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -22,7 +23,7 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_with_true_target_replaces_only_the_estimate():
-    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
+    env = gym.make(TRAIN_ENV_ID, **env_kwargs(8, pose_error_deg=30.0))
     try:
         obs, info = env.reset(seed=3)
         truth = with_true_target(env, obs, info["target"])
@@ -36,14 +37,14 @@ def test_with_true_target_replaces_only_the_estimate():
 
 
 def test_the_pose_error_range_draws_a_uniform_noisy_source():
-    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_range_deg=(5.0, 25.0)))
+    env = gym.make(TRAIN_ENV_ID, **env_kwargs(8, pose_error_range_deg=(5.0, 25.0)))
     try:
         source = env.unwrapped.pose_source
         assert isinstance(source, UniformNoisyPose) and (source.low_deg, source.high_deg) == (5.0, 25.0)
         env.spec.to_json()  # JSON: a dataset recorded in this env rebuilds it
     finally:
         env.close()
-    assert "pose_source" not in train_env_kwargs(8)
+    assert "pose_source" not in env_kwargs(8)
 
 
 def test_the_clone_sees_the_estimate_and_the_approach_is_labelled_from_it(tmp_path):
@@ -51,10 +52,10 @@ def test_the_clone_sees_the_estimate_and_the_approach_is_labelled_from_it(tmp_pa
     *estimated* stand-off point (a switch the clone can see), and the clone sees the estimate."""
     cfg = BCConfig(episodes=1, num_mushrooms=(8,), pose_error_deg=30.0, out="unused")
     with minari_root(tmp_path):
-        recorded = _record(cfg, [("bc/learner-v0", gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0)))],
+        recorded = _record(cfg, [("bc/learner-v0", gym.make(TRAIN_ENV_ID, **env_kwargs(8, pose_error_deg=30.0)))],
                            range(3, 4), actor=lambda obs: np.zeros(7, np.float32), beta=0.0, progress=False)
     demos = labelled_steps(recorded, ["target_pose"])
-    env = gym.make(TRAIN_ENV_ID, **train_env_kwargs(8, pose_error_deg=30.0))
+    env = gym.make(TRAIN_ENV_ID, **env_kwargs(8, pose_error_deg=30.0))
     try:
         obs, _ = env.reset(seed=3)
         np.testing.assert_allclose(demos["target_pose"][0], obs["target_pose"])
@@ -89,6 +90,6 @@ def test_the_removed_privileged_teacher_is_refused_by_name_and_older_runs_still_
     assert read_recipe(old).config == BCConfig(episodes=10)
     truth = tmp_path / "truth.yml"
     truth.write_text("recipe: bc\nteacher: truth\n")
-    with pytest.raises(RecipeError, match="teacher: the privileged teacher .* removed on 2026-12-07: its clone picked 24 %"):
+    with pytest.raises(RecipeError, match="teacher: the privileged teacher was removed in 0.2.0: its clone picked 24 %"):
         read_recipe(truth)
 

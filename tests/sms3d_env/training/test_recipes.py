@@ -1,5 +1,6 @@
-"""Recipes as data: the shipped recipe files make the configs of the shipped artefacts, a run's
-``config.json`` is a recipe of that run, and values given by hand are read as the recipe reads them."""
+"""Recipes as data: the shipped recipe files make the configs of the shipped artefacts, a
+behaviour-cloning run's ``config.json`` is a recipe of that run, an RL recipe is RL Baselines3
+Zoo's file as it stands, and values given by hand are read as the recipe reads them."""
 
 from __future__ import annotations
 
@@ -11,12 +12,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sms3d_env.training import BCConfig, TrainConfig
-from sms3d_env.training.recipes import (
-    default_recipe,
-    parse_hyperparams,
-    read_recipe,
-)
+from sms3d_env.training import BCConfig
+from sms3d_env.training.recipes import parse_hyperparams, read_recipe
 from sms3d_env.training.zoo import RECIPES_DIR, RecipeError
 
 WEIGHTS = Path(__file__).parents[3] / "sms3d_env" / "weights"
@@ -38,24 +35,26 @@ def test_every_shipped_recipe_reads():
     assert {read_recipe(name).kind for name in names} == {"bc", "rl"}
 
 
-def test_a_config_mapping_recipe_starts_from_its_kinds_defaults(tmp_path):
-    path = tmp_path / "rl.yml"
-    path.write_text("recipe: rl\npose_error_range_deg: [0, 30]\npose_source: noisy\nnet_arch: [64, 64]\n")
+def test_the_ppo_recipe_is_rl_zoos_file_for_sms3dpicktrain_v2():
+    recipe = read_recipe("ppo")
+    assert (recipe.kind, recipe.env_id) == ("rl", "SMS3DPickTrain-v2")
+    assert recipe.config["env_kwargs"] == {"scene": {"config": {"placement": {"num_mushrooms": 10}}, "pool": 500},
+                                           "start": {"share": 0.75}}
+
+
+def test_a_config_mapping_recipe_starts_from_the_bc_defaults(tmp_path):
+    path = tmp_path / "bc.yml"
+    path.write_text("recipe: bc\npose_error_range_deg: [0, 30]\nnet_arch: [64, 64]\n")
     recipe = read_recipe(path)
-    assert recipe.kind == "rl" and recipe.source == str(path)
-    assert recipe.config == TrainConfig(**{**asdict(default_recipe("rl").config),
-                                          "pose_error_range_deg": (0.0, 30.0), "pose_source": "noisy",
-                                          "net_arch": (64, 64)})
+    assert recipe.kind == "bc" and recipe.source == str(path)
+    assert recipe.config == BCConfig(pose_error_range_deg=(0.0, 30.0), net_arch=(64, 64))
 
 
 @pytest.mark.parametrize("text, named", [
-    ("recipe: imitation\n", "recipe: must be one of rl, bc"),
-    ("recipe: rl\nlr: 0.1\n", "no field lr in an rl recipe"),
-    ("recipe: residual\n", "recipe: residual: residual PPO on top of the scripted picker was removed on 2026-12-07"),
-    ("recipe: trigger-rollouts\n", "recipe: trigger-rollouts: the learned descend trigger (sms3d train-trigger"),
-    ("recipe: rl\nresidual_scale: 0.5\n", "residual_scale: residual PPO on top of the scripted picker was removed"),
+    ("recipe: imitation\n", "recipe: must be bc (or no recipe key: an RL Zoo file)"),
+    ("recipe: bc\nlr: 0.1\n", "no field lr in a bc recipe"),
+    ("recipe: rl\ntotal_steps: 10\n", "recipe: rl: a mapping of TrainConfig fields, removed in 0.2.0"),
     ("recipe: bc\nepochs: -1\n", "BCConfig.epochs must be an integer >= 1"),
-    ("recipe: rl\nuse_sde: true\n", "use_sde: removed on 2026-12-06"),
     ("- a list\n", "not a mapping of settings"),
     ("recipe: [unclosed\n", "not readable RL Zoo YAML"),
 ])
@@ -78,9 +77,9 @@ def test_numbers_given_by_hand_are_read_as_numbers(number):
 def test_rates_in_exponent_notation_are_numbers_in_a_recipe_file(tmp_path):
     """``learning_rate: 3e-4`` (YAML 1.2, JSON) is a number, as a run's config.json writes it."""
     path = tmp_path / "rates.yml"
-    path.write_text("recipe: rl\nlearning_rate: 3e-4\nlearning_rate_final: 3e-05\ntotal_steps: 1000\n")
+    path.write_text("recipe: bc\nlearning_rate: 3e-4\nepisodes: 1000\n")
     cfg = read_recipe(path).config
-    assert (cfg.learning_rate, cfg.learning_rate_final, cfg.total_steps) == (3e-4, 3e-5, 1000)
+    assert (cfg.learning_rate, cfg.episodes) == (3e-4, 1000)
 
 
 def test_hyperparams_read_yaml_values():

@@ -1,12 +1,11 @@
-"""Loading a policy file never runs code from it: every model the training code writes (PPO and
+"""Loading a policy file never runs code from it: every model the package saves and loads (PPO and
 SAC, dict and flattened observations, the shipped features extractor, gSDE, a falling rate)
 loads with no unpickler called and acts as the saved model did; the shipped policies act as SB3's
-own loader makes them act; crafted pickled entries never run; a resumed run unpickles nothing."""
+own loader makes them act; crafted pickled entries never run."""
 
 from __future__ import annotations
 
 import base64
-import io
 import json
 import pickle
 import shutil
@@ -16,7 +15,6 @@ import cloudpickle
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch
 from stable_baselines3 import PPO, SAC
 
 from sms3d_env.pickers.policy import PolicyActor
@@ -24,13 +22,10 @@ from sms3d_env.policies.features import NormalizedFlatten
 from sms3d_env.policies.files import (
     POLICY_SPEC_MEMBER,
     PolicyFileError,
-    load_replay_buffer,
     record_policy_spec,
     save_model,
-    save_replay_buffer,
 )
 from sms3d_env.policies.loader import SHIPPED_POLICY, load_model, load_sb3
-from sms3d_env.training import TrainConfig, train_policy
 from sms3d_env.training.schedules import falling_rate
 
 
@@ -70,14 +65,14 @@ def _bc_model():
 
 
 def _flat_sde_model():
-    """As ``rl._build_model`` with --flat-observation --use-sde and a falling rate (pickled in the zip)."""
+    """A flat-observation PPO with gSDE and a falling rate (pickled in the zip)."""
     return PPO("MlpPolicy", "Pendulum-v1", n_steps=16, batch_size=16, n_epochs=1, use_sde=True,
                learning_rate=falling_rate(3e-4, 3e-5), policy_kwargs={"net_arch": [16], "log_std_init": -1.0},
                seed=0, device="cpu")
 
 
 def _sac_model(policy, env):
-    """As ``rl._build_model`` builds SAC, with a small buffer."""
+    """A SAC with a small buffer."""
     return SAC(policy, env, learning_starts=8, buffer_size=64, batch_size=8, policy_kwargs={"net_arch": [16]},
                seed=0, device="cpu")
 
@@ -219,56 +214,3 @@ def test_a_model_saved_without_a_description_loads_once_recorded_with_its_weight
     obs = _observations(model.observation_space)
     np.testing.assert_array_equal(load_sb3(tmp_path / "model.zip", ("ppo",)).predict(obs, deterministic=True)[0],
                                   model.predict(obs, deterministic=True)[0])
-
-
-def test_a_replay_buffer_round_trips_as_arrays_and_another_is_refused(tmp_path):
-    model = _sac_model("MultiInputPolicy", _DictEnv())
-    model.learn(20)
-    save_replay_buffer(model.replay_buffer, tmp_path / "buffer.npz")
-    fresh = _sac_model("MultiInputPolicy", _DictEnv())
-    load_replay_buffer(fresh.replay_buffer, tmp_path / "buffer.npz")
-    assert (fresh.replay_buffer.pos, fresh.replay_buffer.full) == (model.replay_buffer.pos, model.replay_buffer.full)
-    np.testing.assert_array_equal(fresh.replay_buffer.observations["a"], model.replay_buffer.observations["a"])
-    np.testing.assert_array_equal(fresh.replay_buffer.actions, model.replay_buffer.actions)
-    with pytest.raises(PolicyFileError, match="buffer.npz: not this run's replay buffer"):
-        load_replay_buffer(_sac_model("MlpPolicy", "Pendulum-v1").replay_buffer, tmp_path / "buffer.npz")
-    np.savez(tmp_path / "pickled.npz", pos=np.array([_Payload(tmp_path / "ran")], dtype=object))
-    with pytest.raises(PolicyFileError, match="pickled.npz"):
-        load_replay_buffer(fresh.replay_buffer, tmp_path / "pickled.npz")
-    assert not (tmp_path / "ran").exists()
-
-
-def test_a_run_resumes_from_its_checkpoint_with_nothing_unpickled(tmp_path, capsys, monkeypatch):
-    out = tmp_path / "run"
-    cfg = TrainConfig(out=str(out), algo="ppo", total_steps=128, n_steps=64, batch_size=64, num_mushrooms=8,
-                      max_episode_steps=40, eval_freq=0, checkpoint_freq=64, verbose=0, net_arch=(32, 32),
-                      learning_rate_final=1e-5, vec_env="dummy", n_envs=1)
-    train_policy(cfg)
-    for name in ("summary.json", "model.zip", "checkpoints/ppo_128_steps.zip"):
-        (out / name).unlink()  # as if killed after the checkpoint at 64 steps
-    capsys.readouterr()
-    no_unpickling(monkeypatch)
-    assert train_policy(cfg)["steps"] == 128
-    assert f"resuming {out} from step 64 of 128" in capsys.readouterr().out
-    assert load_model(out / "model.zip").num_timesteps == 128
-    # The rate of the last update is the run's falling rate at its end, not SB3's default 3e-4:
-    # the schedule pickled in the checkpoint was rebuilt from the run's settings.
-    with zipfile.ZipFile(out / "model.zip") as z:
-        optimizer = torch.load(io.BytesIO(z.read("policy.optimizer.pth")), weights_only=True)
-    assert optimizer["param_groups"][0]["lr"] == pytest.approx(1e-5)
-
-
-def test_a_sac_checkpoint_whose_replay_buffer_is_a_pickle_is_refused_by_name(tmp_path, monkeypatch):
-    out = tmp_path / "run"
-    cfg = TrainConfig(out=str(out), algo="sac", total_steps=100, learning_starts=50, batch_size=32, num_mushrooms=8,
-                      max_episode_steps=40, eval_freq=0, checkpoint_freq=100, verbose=0, net_arch=(32, 32),
-                      vec_env="dummy", n_envs=1)
-    train_policy(cfg)
-    (out / "summary.json").unlink()
-    (out / "checkpoints" / "sac_replay_buffer_100_steps.npz").unlink()
-    pickled = out / "checkpoints" / "sac_replay_buffer_100_steps.pkl"  # as earlier versions wrote it
-    pickled.write_bytes(pickle.dumps(_Payload(tmp_path / "ran")))
-    no_unpickling(monkeypatch)
-    with pytest.raises(PolicyFileError, match=f"{pickled}: the replay buffer is an SB3 pickle"):
-        train_policy(cfg)
-    assert not (tmp_path / "ran").exists()

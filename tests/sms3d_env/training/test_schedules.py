@@ -8,7 +8,6 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sms3d_env.training import TrainConfig
 from sms3d_env.training.schedules import WallAwareLinearSchedule
 
 
@@ -66,11 +65,15 @@ def test_a_wall_that_is_not_a_positive_time_is_refused_by_name(wall):
         WallAwareLinearSchedule(1e-3, 1e-4, max_wall_s=wall)
 
 
-@pytest.mark.parametrize("kwargs", [
-    {"learning_rate_by_wall": True, "max_wall_s": 60.0},
-    {"learning_rate_by_wall": True, "learning_rate_final": 1e-5},
-    {"learning_rate_by_wall": 1, "learning_rate_final": 1e-5, "max_wall_s": 60.0},
-], ids=["no final rate", "no wall", "not a bool"])
-def test_the_config_refuses_a_wall_schedule_it_cannot_run(kwargs):
-    with pytest.raises(ValueError, match="learning_rate_by_wall"):
-        TrainConfig(**kwargs)
+
+def test_the_wall_clock_limit_stops_training_once_its_time_has_passed(monkeypatch):
+    from sms3d_env.training import schedules
+
+    now = [100.0]
+    monkeypatch.setattr(schedules.time, "perf_counter", lambda: now[0])
+    limit = schedules.wall_clock_limit(60.0)
+    limit._on_training_start()
+    now[0] = 159.0
+    assert limit._on_step()
+    now[0] = 160.0
+    assert not limit._on_step()
