@@ -20,8 +20,8 @@ PICKER_KINDS = ("scripted", "policy")
 #: Picker kinds removed from the package, refused by name with why: ``"residual[:PATH]"`` ran a
 #: residual policy on top of the scripted picker (no path: the shipped descend trigger).
 REMOVED_PICKER_KINDS = {
-    "residual": "residual PPO and the learned descend trigger on top of the scripted picker were removed on "
-                "2026-12-07: residual PPO never beat the scripted picker and the trigger's gain was gone on v1 "
+    "residual": "residual PPO and the learned descend trigger on top of the scripted picker were removed in "
+                "0.2.0: residual PPO never beat the scripted picker and the trigger's gain was gone on v1 "
                 "(McNemar p >= 0.25; docs/results-training.md, \"What did not widen it\"; CHANGELOG.md; git "
                 "history keeps them); use scripted or policy[:PATH]",
 }

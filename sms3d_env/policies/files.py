@@ -198,13 +198,6 @@ class ObservationStats:
     clip_reward: float = 10.0
     gamma: float = 0.99
 
-    @classmethod
-    def of(cls, venv: Any) -> ObservationStats:
-        """The statistics of a ``VecNormalize`` now (copies)."""
-        rms = venv.obs_rms if isinstance(venv.obs_rms, dict) else {None: venv.obs_rms}
-        return cls({k: _copy(r) for k, r in rms.items()}, float(venv.clip_obs), float(venv.epsilon),
-                   bool(venv.norm_reward), _copy(venv.ret_rms), float(venv.clip_reward), float(venv.gamma))
-
     def normalize_obs(self, obs: np.ndarray | dict[str, np.ndarray]) -> np.ndarray | dict[str, np.ndarray]:
         """``obs`` standardised and clipped as ``VecNormalize.normalize_obs`` does (float32)."""
         def one(x: np.ndarray, r: RunningStats) -> np.ndarray:
@@ -214,23 +207,9 @@ class ObservationStats:
             return {k: one(v, self.obs[k]) if k in self.obs else v for k, v in obs.items()}
         return one(obs, self.obs[None])
 
-    def save(self, path: str | Path) -> None:
-        """Write to ``path`` (``.npz``: arrays, and the rest as JSON text), atomically."""
-        arrays: dict[str, np.ndarray] = {}
-        for k, r in self.obs.items():
-            suffix = "" if k is None else f".{k}"
-            arrays.update({f"obs_mean{suffix}": r.mean, f"obs_var{suffix}": r.var,
-                           f"obs_count{suffix}": np.float64(r.count)})
-        if self.returns is not None:
-            arrays.update(ret_mean=self.returns.mean, ret_var=self.returns.var, ret_count=np.float64(self.returns.count))
-        meta = {"format": _FORMAT, "keys": None if None in self.obs else list(self.obs), "clip_obs": self.clip_obs,
-                "epsilon": self.epsilon, "norm_reward": self.norm_reward, "clip_reward": self.clip_reward,
-                "gamma": self.gamma}
-        write_via_temp(path, lambda tmp: np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays))
-
     @classmethod
     def load(cls, path: str | Path) -> ObservationStats:
-        """Read what :meth:`save` wrote, without unpickling anything (``PolicyFileError`` naming
+        """Read an ``obs_rms.npz``, without unpickling anything (``PolicyFileError`` naming
         the file when it is missing, cut or not such a file)."""
         path = Path(path)
         try:
@@ -272,10 +251,6 @@ class ObservationStats:
         if not (math.isfinite(self.epsilon) and self.epsilon >= 0 and math.isfinite(self.clip_obs) and self.clip_obs > 0):
             raise PolicyFileError(path, f"clip_obs {self.clip_obs} and epsilon {self.epsilon}: must be finite, "
                                         "clip_obs > 0 and epsilon >= 0")
-
-
-def _copy(r: Any) -> RunningStats:
-    return RunningStats(np.array(r.mean, np.float64), np.array(r.var, np.float64), float(r.count))
 
 
 def _shapes_text(shapes: dict[str | None, tuple[int, ...]]) -> str:

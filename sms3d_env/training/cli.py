@@ -53,11 +53,18 @@ DEPRECATED_BC_FLAGS: dict[str, tuple[str, dict[str, Any]]] = {
     "--dagger-episodes": ("dagger_episodes", {"type": int}),
     "--posture-target": ("posture_target", {"choices": POSTURE_TARGETS}),
 }
-#: Flags of the package's own RL trainer, which 0.2.0 replaced by RL Zoo's; refused by name.
-RL_TRAINER_FLAGS = ("--normalize", "--normalize-reward", "--flat-observation", "--pose-source", "--log-std-init",
-                    "--reward-type", "--pregrasp-start", "--pregrasp-anneal", "--gamma", "--learning-rate",
-                    "--learning-rate-final", "--learning-rate-by-wall", "--target-kl", "--max-wall-s", "--scene-pool",
-                    "--critic-warmup-steps", "--time-limit-terminal", "--use-sde", "--sde-sample-freq")
+#: Flags of the package's own RL trainer, which 0.2.0 replaced by RL Zoo's: refused by name, each
+#: with the recipe key (or callback) that sets what it set.
+RL_TRAINER_FLAGS = {
+    "--learning-rate": "learning_rate", "--gamma": "gamma", "--target-kl": "target_kl", "--normalize": "normalize",
+    "--normalize-reward": "normalize: {norm_reward: true}", "--log-std-init": "policy_kwargs: {log_std_init: ...}",
+    "--flat-observation": "env_wrapper: gymnasium.wrappers.FlattenObservation", "--pose-source": "env_kwargs.pose_source",
+    "--reward-type": "env_kwargs.reward_type", "--pregrasp-start": "env_kwargs.start.share",
+    "--scene-pool": "env_kwargs.scene.pool", "--pregrasp-anneal": "the callback pregrasp_annealing",
+    "--learning-rate-final": "the callback falling_learning_rate", "--learning-rate-by-wall": "its max_wall_s",
+    "--max-wall-s": "the callback wall_clock_limit", "--use-sde": "use_sde", "--sde-sample-freq": "sde_sample_freq",
+    "--critic-warmup-steps": "none: its runs measured worse", "--time-limit-terminal": "none: its runs measured worse",
+}
 
 
 def _dest(flag: str) -> str:
@@ -72,10 +79,10 @@ def _recipe_of(args: Any) -> Any:
     from sms3d_env.training.imitation import BCConfig
     from sms3d_env.training.recipes import Recipe, parse_hyperparams, read_recipe
 
-    retired = [flag for flag in RL_TRAINER_FLAGS if getattr(args, _dest(flag)) is not None]
+    retired = [f"{flag} ({key})" for flag, key in RL_TRAINER_FLAGS.items() if getattr(args, _dest(flag)) is not None]
     if retired:
         raise RecipeError(f"{', '.join(retired)}: removed in 0.2.0 with the package's own RL trainer; an RL recipe "
-                          "is an RL Baselines3 Zoo file: set the value in it (a copy of sms3d_env/recipes/ppo.yml) "
+                          "is an RL Baselines3 Zoo file: set that key in it (a copy of sms3d_env/recipes/ppo.yml) "
                           "or with --hyperparams KEY=VALUE (docs/training.md)")
     for flag, value in (("--recipe", args.legacy_recipe), ("--conf-file", args.legacy_conf_file)):
         if value is not None:

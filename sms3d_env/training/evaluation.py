@@ -36,7 +36,7 @@ def evaluate_policy_success(model_path: str | Path | None = None, episodes: int 
 
     ``env_id``: the env to run it in when its files do not say (a model SB3's own ``save`` wrote
     whose spaces fit several registered envs); one they name must be that
-    (:class:`~sms3d_env.training.actor.PolicyActor`).
+    (:class:`~sms3d_env.pickers.policy.PolicyActor`).
 
     ``video_dir``: also write every episode as ``episode_<seed>.mp4`` there (rendered from the
     env's ``pick`` camera at ``video_size``, (height, width) pixels, both even; annotated by

@@ -11,7 +11,6 @@ import pytest
 import sms3d_env  # noqa: F401  (registers the env ids)
 from sms3d_env.controller import POSTURE_TARGETS
 from sms3d_env.training import envs as training_envs
-from sms3d_env.training import imitation
 
 
 def _posture_after_turning(posture_target: str) -> tuple[np.ndarray, np.ndarray]:
@@ -46,8 +45,8 @@ def test_a_bad_posture_target_is_refused_by_name():
 
 def test_the_training_recipes_know_the_same_posture_targets():
     assert training_envs.POSTURE_TARGETS == POSTURE_TARGETS
-    assert imitation.env_options("tool") == {"controller": {"posture_target": "tool"}}
-    assert imitation.env_options() == {}
+    assert training_envs.env_options("tool") == {"controller": {"posture_target": "tool"}}
+    assert training_envs.env_options() == {}
 
 
 def test_a_failed_posture_solve_waits_for_another_turn(monkeypatch):

@@ -17,7 +17,7 @@ import pytest
 
 from sms3d_env.pickers.policy import PolicyActor
 from sms3d_env.pickers.registry import make_picker_env, parse_picker
-from sms3d_env.policies.files import ObservationStats, PolicyFileError
+from sms3d_env.policies.files import ObservationStats, PolicyFileError, RunningStats
 from sms3d_env.policies.loader import SHIPPED_POLICY, load_sb3
 from sms3d_env.training import main
 
@@ -61,14 +61,17 @@ class _TwoKeys(gym.Env):
         return self.observation_space.sample(), 1.0, False, False, {}
 
 
-def test_observation_statistics_round_trip_as_vecnormalize_applies_them(tmp_path):
+def test_observation_statistics_read_as_vecnormalize_applies_them(tmp_path, write_obs_rms):
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
     trained = VecNormalize(DummyVecEnv([_TwoKeys]), norm_reward=True, gamma=0.95, clip_obs=2.0)
     trained.reset()
     for _ in range(20):
         trained.step(np.zeros((1, 1), np.float32))
-    ObservationStats.of(trained).save(tmp_path / "obs_rms.npz")
+    saved = ObservationStats({k: RunningStats(r.mean, r.var, r.count) for k, r in trained.obs_rms.items()},
+                             trained.clip_obs, trained.epsilon, True,
+                             RunningStats(trained.ret_rms.mean, trained.ret_rms.var, trained.ret_rms.count), gamma=0.95)
+    write_obs_rms(saved, tmp_path / "obs_rms.npz")
     stats = ObservationStats.load(tmp_path / "obs_rms.npz")
     obs = {"a": np.array([4.0, -3.0, 0.5], np.float32), "b": np.array([1.0, -1.0], np.float32)}
     expected = trained.normalize_obs(obs)

@@ -13,7 +13,8 @@ import pytest
 from sms3d_env.pickers.policy import PolicyActor
 from sms3d_env.pickers.registry import PickerSpec, make_picker_env, parse_picker
 from sms3d_env.policies.loader import SHIPPED_POLICY
-from sms3d_env.study.sweep import SweepConfig, run_sweep
+from sms3d_env.study.plan import SweepConfig
+from sms3d_env.study.sweep import run_sweep
 from sms3d_env.training import main
 from sms3d_env.training.imitation import BCConfig, train_bc
 
@@ -104,7 +105,7 @@ def test_parse_picker_defaults():
 def test_parse_picker_says_the_residual_pickers_were_removed_and_where_the_finding_is(text):
     """The residual pickers (residual PPO, the learned descend trigger) were removed: asking for
     one names it, why and where the measurement lives, before looking for any file."""
-    with pytest.raises(ValueError, match=r"picker 'residual.*removed on 2026-12-07: residual PPO never beat the "
+    with pytest.raises(ValueError, match=r"picker 'residual.*removed in 0.2.0: residual PPO never beat the "
                                          r"scripted picker .*docs/results-training.md") as err:
         parse_picker(text)
     assert "CHANGELOG.md" in str(err.value) and "policy[:PATH]" in str(err.value)

@@ -34,8 +34,8 @@ def _train_policy_command(argv, capsys):
     ([], "name a recipe"),
     (["no-such-recipe"], "no recipe file no-such-recipe (shipped recipes: pick_policy, ppo)"),
     (["ppo", "--learning-rate", "1e-3", "--normalize"],
-     "--normalize, --learning-rate: removed in 0.2.0 with the package's own RL trainer"),
-    (["ppo", "--use-sde"], "--use-sde: removed in 0.2.0"),
+     "--learning-rate (learning_rate), --normalize (normalize): removed in 0.2.0 with the package's own RL trainer"),
+    (["ppo", "--max-wall-s", "60"], "--max-wall-s (the callback wall_clock_limit): removed in 0.2.0"),
     (["ppo", "--algo", "nope"], "--algo nope: not an RL Zoo algorithm"),
 ], ids=lambda v: v if isinstance(v, str) else " ".join(v))
 def test_train_policy_refuses_what_its_recipe_cannot_use_by_name(capsys, argv, flag):

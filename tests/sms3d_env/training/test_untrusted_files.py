@@ -278,11 +278,12 @@ def test_dict_observation_vecnormalize_statistics_read_as_sb3_loads_them(tmp_pat
     ({"mean": np.array([np.nan, 0.0, 0.0])}, "not finite"),
     ({"mean": np.zeros(4), "var": np.ones(4)}, "statistics of shape"),
 ])
-def test_observation_statistics_that_cannot_normalise_are_refused_naming_the_file(tmp_path, change, why):
+def test_observation_statistics_that_cannot_normalise_are_refused_naming_the_file(tmp_path, change, why,
+                                                                                   write_obs_rms):
     good = {"mean": np.zeros(3), "var": np.ones(3), "count": 5.0}
     stats = ObservationStats({"a": RunningStats(**{**good, **change}), "b": RunningStats(np.zeros(2), np.ones(2), 5.0)},
                              10.0, 1e-8)
-    stats.save(tmp_path / "obs_rms.npz")
+    write_obs_rms(stats, tmp_path / "obs_rms.npz")
     with pytest.raises(PolicyFileError, match=f"{tmp_path / 'obs_rms.npz'}: obs\\['a'\\]: .*{why}"):
         ObservationStats.load(tmp_path / "obs_rms.npz").check_usable(tmp_path / "obs_rms.npz",
                                                                       _DictEnv.observation_space)
