@@ -102,7 +102,7 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
 
 def plot_pickers(curves: dict[str, Sequence[dict[str, Any]]], path: str | Path) -> None:
     """One line per picker: the sweeps of several pickers on the same seeded episodes, each the
-    rows of one physics variant and position error (``sweep.compared_rows``)."""
+    rows of one physics variant and position error (``compare.compared_rows``)."""
     plot_curves({label: success_table(rows) for label, rows in curves.items()}, path,
                 "Pickers on the same seeded episodes: success vs orientation error")
 

@@ -17,7 +17,7 @@ from sms3d_env.cli import build_parser
 from sms3d_env.gantry import GANTRY_JOINTS, GantryConfig
 from sms3d_env.robot import arm_only_model
 from sms3d_env.robots import ROBOTS, RobotSpec, make_robot, register_robot, registered_robots
-from sms3d_env.study.sweep import SweepConfig
+from sms3d_env.study.plan import SweepConfig
 
 SMALL = {"placement": {"num_mushrooms": 8}}
 

@@ -17,7 +17,8 @@ from sms3d_env.cli import main
 from sms3d_env.study import report as study_report
 from sms3d_env.study.report import summarise, write_report
 from sms3d_env.study.statistics import success_table, tolerable_error, wilson_interval
-from sms3d_env.study.sweep import SweepConfig, plan_tasks, run_sweep
+from sms3d_env.study.plan import SweepConfig, plan_tasks
+from sms3d_env.study.sweep import run_sweep
 
 
 def test_wilson_interval_known_values():
@@ -417,7 +418,7 @@ def test_sweep_refuses_an_empty_or_file_out(tmp_path, capsys, monkeypatch):
 def test_a_resumed_sweep_refuses_a_learned_picker_whose_config_changed(tmp_path, monkeypatch):
     """The picker's ``config.json`` sets the env it acts in: parts made with another are stale."""
     from sms3d_env.policies.loader import SHIPPED_POLICY
-    from sms3d_env.study import sweep
+    from sms3d_env.study import resume
 
     picker = tmp_path / "policy"
     picker.mkdir()
@@ -426,7 +427,7 @@ def test_a_resumed_sweep_refuses_a_learned_picker_whose_config_changed(tmp_path,
     config = SweepConfig(errors_deg=(0.0,), episodes=1, num_mushrooms=8, picker=f"policy:{picker / 'model.zip'}")
     out = tmp_path / "sweep"
     (out / "parts").mkdir(parents=True)
-    (out / "sweep_config.json").write_text(json.dumps(sweep._settings(config)))
+    (out / "sweep_config.json").write_text(json.dumps(resume.settings(config)))
     (out / "parts" / f"{plan_tasks(config)[0].name}.json").write_text("[]")  # the sweep's one task, done
     assert run_sweep(config, out, progress=False) == []  # the same files: resumed
     saved = json.loads((picker / "config.json").read_text())
