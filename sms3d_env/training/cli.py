@@ -208,7 +208,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--checkpoint-freq", type=int, default=None,
                    help="rl: env steps between checkpoints (RL Zoo's --save-freq; default none)")
     p.add_argument("--init-model", default=None, metavar="PATH",
-                   help="rl: continue training this saved model (RL Zoo's --trained-agent)")
+                   help="rl: continue training this saved model (RL Zoo's --trained-agent, which SB3's own "
+                        "loader unpickles: a file you trust)")
     p.add_argument("--num-mushrooms", type=int, nargs="+", default=None,
                    help="bc: the bed sizes the demonstrations cycle through")
     p.add_argument("--pose-error-deg", type=float, default=None,

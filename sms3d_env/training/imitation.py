@@ -180,7 +180,7 @@ def _record(cfg: BCConfig, targets: list[tuple[str, Any]], seeds: range, actor: 
     from sms3d_env.training.demonstrations import record_datasets
 
     return record_datasets(targets, ScriptedPicker.for_env, seeds,
-                           {"picker": "scripted", "made_by": "sms3d train-policy --recipe bc"},
+                           {"picker": "scripted", "made_by": "sms3d train-policy (a bc recipe)"},
                            actor=actor, beta=beta, action_noise=cfg.action_noise,
                            rng=np.random.default_rng([cfg.seed, seeds.start]), desc=desc, progress=progress)
 

@@ -4,9 +4,10 @@ an RL recipe, ``python -m rl_zoo3.train``), or from the ``progress.csv`` (SB3's 
 run of the package's RL trainer before 0.2.0.
 
 ``sms3d learning-curve RUN [RUN ...] --out curve.png`` draws them side by side (one line per run,
-e.g. one per training seed) and prints the table. A run started from a checkpoint of another
-(``--init-model RUN0/checkpoints/ppo_<N>_steps.zip``) is drawn as that run's curve up to ``N``
-followed by its own, its steps and wall time counted on from there: one curve per training.
+e.g. one per training seed) and prints the table. A run of the package's trainer that started
+from a checkpoint of another (``init_model: RUN0/checkpoints/ppo_<N>_steps.zip`` in its
+``config.json``) is drawn as that run's curve up to ``N`` followed by its own, its steps and wall
+time counted on from there: one curve per training.
 """
 
 from __future__ import annotations

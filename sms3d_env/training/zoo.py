@@ -106,9 +106,10 @@ def zoo_argv(recipe: str | Path, *, out: str = "logs", seed: int = 0, algo: str 
             argv += [flag, str(value)]
     if params:
         argv += ["--hyperparams", *_store_dict(params)]
-    env_kwargs = params.get("env_kwargs", entry.get("env_kwargs")) or {}
-    if evaluation_env_kwargs(env_kwargs) != env_kwargs:
-        argv += ["--eval-env-kwargs", *_store_dict(evaluation_env_kwargs(env_kwargs))]
+    # RL Zoo's evaluation builds the registered env as it stands unless given its arguments.
+    evaluation = evaluation_env_kwargs(params.get("env_kwargs", entry.get("env_kwargs")) or {})
+    if evaluation:
+        argv += ["--eval-env-kwargs", *_store_dict(evaluation)]
     return argv
 
 
@@ -136,7 +137,8 @@ def _run_folder(argv: list[str]) -> Path:
 def train_zoo(argv: list[str]) -> dict[str, Any]:
     """Print the RL Zoo command of ``argv`` and run RL Zoo's ``train()`` on it in this process;
     returns ``{"command", "run", "model"}``. A ``--trained-agent`` that is no file is refused
-    first (``PolicyFileError``), as RL Zoo would only assert it."""
+    first (``PolicyFileError``), as RL Zoo would only assert it; RL Zoo loads one with SB3's own
+    loader, which unpickles it (and its run's ``vecnormalize.pkl``): a file to trust."""
     from rl_zoo3.train import train
 
     if "--trained-agent" in argv:
