@@ -103,11 +103,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--robot", nargs="+", default=list(SweepConfig.robots), choices=registered_robots(),
                    help="robots to sweep (registered names; several make the robot an axis: a robot column in "
                         "sweep.csv, a curve and a map per robot)")
-    from sms3d_env.targets import SWEPT_RULES
-
-    p.add_argument("--target", nargs="+", default=list(SweepConfig.targets), choices=SWEPT_RULES,
-                   help="target rules (which mushroom each episode picks: harvest_ready, the env's default, or "
-                        "a class of the study); several make the target an axis, a curve and a map per rule")
+    # The rules are checked by SweepConfig: the targets module imports MuJoCo, which `sms3d --help` must not.
+    p.add_argument("--target", nargs="+", default=list(SweepConfig.targets),
+                   help="target rules (which mushroom each episode picks: harvest_ready, the env's default; the "
+                        "study's classes isolated, crowded, approach_blocked, small; or tallest, largest, random); "
+                        "several make the target an axis, a curve and a map per rule")
     p.add_argument("--backend", choices=BACKENDS, default="process",
                    help="process pool (default) or Ray (same rows)")
     p.add_argument("--variants", nargs="+", default=["default"], choices=sorted(SENSITIVITY_VARIANTS),

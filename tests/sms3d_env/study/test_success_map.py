@@ -9,9 +9,9 @@ import pytest
 
 from generator import SceneConfig, generate_scene
 from sms3d_env.pose_sources import NoisyPose, OraclePose
+from sms3d_env.study.plan import SweepConfig, plan_tasks
 from sms3d_env.study.report import write_report
 from sms3d_env.study.success_map import region_summary, success_grid, tolerance_region
-from sms3d_env.study.plan import SweepConfig, plan_tasks
 from sms3d_env.study.sweep import run_sweep
 
 

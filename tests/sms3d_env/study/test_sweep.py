@@ -15,9 +15,9 @@ from generator.dataset.errors import CorruptFileError
 from generator.errors import ConfigError
 from sms3d_env.cli import main
 from sms3d_env.study import report as study_report
+from sms3d_env.study.plan import SweepConfig, plan_tasks
 from sms3d_env.study.report import summarise, write_report
 from sms3d_env.study.statistics import success_table, tolerable_error, wilson_interval
-from sms3d_env.study.plan import SweepConfig, plan_tasks
 from sms3d_env.study.sweep import run_sweep
 
 
@@ -219,9 +219,10 @@ def test_target_rule_is_an_axis_whose_rows_pick_from_their_class(tmp_path, capsy
     with pytest.raises(ConfigError) as info:
         SweepConfig(targets=("index",))  # names one mushroom of one bed: nothing to sweep
     assert info.value.field == "targets"
-    with pytest.raises(SystemExit) as exited:
-        main(["sweep", "--out", str(tmp_path / "bad"), "--target", "ripest"])
-    assert exited.value.code == 2 and "--target: invalid choice: 'ripest'" in capsys.readouterr().err
+    assert main(["sweep", "--out", str(tmp_path / "bad"), "--target", "ripest"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("sms3d sweep: error: argument --target: must be distinct target rules") and "'ripest'" in err
+    assert not (tmp_path / "bad").exists()
 
 
 def test_report_draws_when_every_episode_of_an_error_succeeds(tmp_path):
