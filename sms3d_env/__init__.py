@@ -26,7 +26,7 @@ _EXPORTS = {
     "PoseSource": "pose_sources", "UniformNoisyPose": "pose_sources", "make_pose_source": "pose_sources",
     "Tool": "tools", "TOOLS": "robot", "RobotConfig": "robot",
     "GantryConfig": "gantry", "ROBOTS": "robots", "make_robot": "robots", "register_robot": "robots",
-    "registered_robots": "robots", "RobotSpec": "robots",
+    "registered_robots": "robots", "RobotSpec": "robots", "UR5eConfig": "ur5e",
     "HandPicker": "pickers.scripted", "ScriptedPicker": "pickers.scripted", "run_episode": "pickers.episode",
 }  # fmt: skip
 

@@ -1,7 +1,8 @@
 """The robots by name: each robot's module registers its class (``@register_robot``, in the style
 of ManiSkill3's ``@register_agent``), and importing this module imports the built-in ones:
-``"gantry"`` (the Cartesian harvester, the default; :mod:`sms3d_env.gantry`) and ``"jaco"`` (the
-Kinova Jaco hanging above the bed, every link colliding; :mod:`sms3d_env.robot`). How to add one:
+``"gantry"`` (the Cartesian harvester, the default; :mod:`sms3d_env.gantry`), ``"jaco"`` (the
+Kinova Jaco hanging above the bed, every link colliding; :mod:`sms3d_env.robot`) and ``"ur5e"``
+(a UR5e-class arm on a pedestal beside the bed; :mod:`sms3d_env.ur5e`). How to add one:
 docs/add-a-robot.md. Importing it loads no MuJoCo: building a robot does."""
 
 from __future__ import annotations
@@ -18,8 +19,9 @@ from sms3d_env.robot_registry import (
     registered_robots,
     robot_class,
 )
+from sms3d_env.ur5e import UR5eConfig
 
-__all__ = ["GantryConfig", "HANGING_JACO", "ROBOTS", "RobotSpec", "make_robot", "register_robot",
+__all__ = ["GantryConfig", "HANGING_JACO", "ROBOTS", "RobotSpec", "UR5eConfig", "make_robot", "register_robot",
            "registered_robots"]
 
 #: The Jaco (``RobotConfig()``'s defaults): hanging upside down 0.7 m above the soil, 0.25 m from
@@ -54,7 +56,7 @@ class RegisteredNames(Sequence[str]):
         return repr(registered_robots())
 
 
-#: The registered robots' names, sorted (the built-in: gantry, jaco).
+#: The registered robots' names, sorted (the built-in: gantry, jaco, ur5e).
 ROBOTS = RegisteredNames()
 
 

@@ -45,7 +45,7 @@ def _short_rail_gantry() -> type:
 
 
 def test_the_built_in_robots_are_registered_by_their_own_modules():
-    assert registered_robots() == ("gantry", "jaco") == ROBOTS == sms3d_env.ROBOTS
+    assert registered_robots() == ("gantry", "jaco", "ur5e") == ROBOTS == sms3d_env.ROBOTS
     assert type(make_robot("gantry")) is GantryConfig and make_robot("jaco") == sms3d_env.RobotConfig()
 
 
@@ -130,7 +130,7 @@ def test_a_name_or_home_that_does_not_fit_is_refused(registry):
 
 def test_an_unknown_name_lists_the_registered_ones(registry):
     _short_rail_gantry()
-    with pytest.raises(ValueError, match=r"registered robots \('gantry', 'jaco', 'short_rail_gantry'\), got 'ur5'"):
+    with pytest.raises(ValueError, match=r"registered robots \('gantry', 'jaco', 'short_rail_gantry', 'ur5e'\), got 'ur5'"):
         make_robot("ur5")
     with pytest.raises(ValueError, match="registered robots"):
         gym.make("SMS3DPick-v2", robot="ur5")
