@@ -202,6 +202,25 @@ def test_orders_clear_the_bed(bed):
         assert r["picked"] >= 1 and r["attempts"] >= r["picked"]
 
 
+def test_a_planner_gives_up_on_a_spot_where_picks_failed():
+    from sms3d_env.harvest.scan import BED_FEATURES, CANDIDATE_FEATURES
+
+    rows = np.zeros((2, len(CANDIDATE_FEATURES)), np.float32)
+    rows[0, :3] = [1.0, 0.1, 0.1]  # available, its cap top at (0.1, 0.1)
+    bed = np.zeros(len(BED_FEATURES), np.float32)
+    scans, attempts = BED_FEATURES.index("scans"), BED_FEATURES.index("attempts")
+    mask = np.array([True, False, True, True])
+    planner = ScriptedOrder("detection", "after_failure", give_up_after=2)
+    actions = []
+    for _ in range(2):  # pick, fail, re-scan (the candidate is new again), ...
+        actions.append(planner({"candidates": rows, "bed": bed.copy()}, mask))
+        bed[attempts] += 1
+        actions.append(planner({"candidates": rows, "bed": bed.copy()}, mask))
+        bed[scans] += 1
+    actions.append(planner({"candidates": rows, "bed": bed.copy()}, mask))
+    assert actions == [0, 2, 0, 2, 3]  # ... and after the second failure there, stop
+
+
 def test_pickled_env_goes_on_the_same(bed):
     env = make(bed)
     env.reset(seed=0)
