@@ -13,7 +13,7 @@ import os
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
 
-from sms3d_env.robot import ROBOT_CONAFFINITY, TOOL_CONTYPE, Tool, check_tool_fields, mount_tool
+from sms3d_env.robot import Tool, add_drives, check_tool_fields, mount_tool
 from sms3d_env.robot_registry import register_robot
 
 if TYPE_CHECKING:
@@ -93,17 +93,13 @@ class GantryConfig:
         import mujoco
 
         spec = mujoco.MjSpec.from_file(GANTRY_XML)
-        for body in spec.bodies[2:]:  # everything that moves (world and the static frame aside)
-            body.gravcomp = 1.0
-        for g in spec.geoms:
-            g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
+        drives = []
         for jname in GANTRY_JOINTS:
             slide = jname in _SLIDES
             spec.joint(jname).armature = self.slide_armature if slide else self.wrist_armature
-            act = spec.add_actuator(name=f"act_{jname}", target=jname, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            act.set_to_position(kp=self.slide_kp if slide else self.wrist_kp, dampratio=1.0)
             limit = self.lift_force if jname == "lift_z" else self.slide_force if slide else self.wrist_force
-            act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            act.forcerange = [-limit, limit]
+            drives.append((jname, self.slide_kp if slide else self.wrist_kp, limit))
+        # Everything that moves (world and the static frame aside) is gravity-compensated.
+        add_drives(spec, [b.name for b in spec.bodies[2:]], drives)
         mount_tool(spec, spec.body("flange"), self, (1.0, 0.0, 0.0, 0.0))
         return spec

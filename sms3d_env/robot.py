@@ -12,6 +12,7 @@ MuJoCo is imported where a robot is built, so that listing the robots' names loa
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar, Literal
 
@@ -218,20 +219,30 @@ def build_arm_spec(cfg: RobotConfig) -> mujoco.MjSpec:
     import mujoco
 
     spec = mujoco.MjSpec.from_file(os.path.join(kinova_dir(), "jaco_arm.xml"))
-    for name in ("b_1", "b_2", "b_3", "b_4", "b_5", "b_6"):
-        spec.body(name).gravcomp = 1.0
-    for g in spec.geoms:
-        g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
-    for i, jname in enumerate(ARM_JOINTS):
-        large = i < 3
-        act = spec.add_actuator(name=f"act_{jname}", target=jname,
-                                trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        act.set_to_position(kp=cfg.kp_large if large else cfg.kp_small, dampratio=1.0)
-        f = cfg.force_large if large else cfg.force_small
-        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        act.forcerange = [-f, f]
+    add_drives(spec, ("b_1", "b_2", "b_3", "b_4", "b_5", "b_6"),
+               [(j, cfg.kp_large, cfg.force_large) if i < 3 else (j, cfg.kp_small, cfg.force_small)
+                for i, j in enumerate(ARM_JOINTS)])
     mount_tool(spec, spec.body("b_6"), cfg, _tilted(JACO_TOOL_QUAT, cfg.tool_tilt_deg))
     return spec
+
+
+def add_drives(spec: mujoco.MjSpec, moving_bodies: Sequence[str],
+               drives: Sequence[tuple[str, float, float]]) -> None:
+    """What every robot's ``build_spec`` does to its model: the ``moving_bodies`` gravity-compensated,
+    every geom given ``TOOL_CONTYPE`` / ``ROBOT_CONAFFINITY`` (it collides with the soil and the
+    mushrooms, not with another link), and per ``(joint, kp, force limit)`` of ``drives``, in
+    their order, a critically damped position actuator ``act_<joint>`` limited to that force."""
+    import mujoco
+
+    for body in moving_bodies:
+        spec.body(body).gravcomp = 1.0
+    for g in spec.geoms:
+        g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
+    for jname, kp, limit in drives:
+        act = spec.add_actuator(name=f"act_{jname}", target=jname, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        act.set_to_position(kp=kp, dampratio=1.0)
+        act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        act.forcerange = [-limit, limit]
 
 
 def _tilted(tool_quat: tuple[float, ...], tilt_deg: float) -> tuple[float, ...]:

@@ -14,14 +14,7 @@ import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from sms3d_env.robot import (
-    APPROACHES,
-    ROBOT_CONAFFINITY,
-    TOOL_CONTYPE,
-    Tool,
-    check_tool_fields,
-    mount_tool,
-)
+from sms3d_env.robot import APPROACHES, Tool, add_drives, check_tool_fields, mount_tool
 from sms3d_env.robot_registry import register_robot
 
 if TYPE_CHECKING:
@@ -111,16 +104,9 @@ class UR5eConfig:
         import mujoco
 
         spec = mujoco.MjSpec.from_file(UR5E_XML)
-        for link in _LINKS:
-            spec.body(link).gravcomp = 1.0
-        for g in spec.geoms:  # every link collides with the soil and the mushrooms
-            g.contype, g.conaffinity = TOOL_CONTYPE, ROBOT_CONAFFINITY
-        for i, jname in enumerate(UR5E_JOINTS):
-            large = i < 3
-            act = spec.add_actuator(name=f"act_{jname}", target=jname, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            act.set_to_position(kp=self.kp_large if large else self.kp_small, dampratio=1.0)
-            limit = self.force_large if large else self.force_small
-            act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            act.forcerange = [-limit, limit]
+        # Every link collides with the soil and the mushrooms; the shoulder, upper arm and elbow
+        # drives are the large ones.
+        add_drives(spec, _LINKS, [(j, self.kp_large, self.force_large) if i < 3 else (j, self.kp_small, self.force_small)
+                                  for i, j in enumerate(UR5E_JOINTS)])
         mount_tool(spec, spec.body("flange"), self, UR5E_TOOL_QUAT)
         return spec
