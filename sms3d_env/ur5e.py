@@ -52,9 +52,10 @@ class UR5eConfig:
             30 deg pose error 2 to 3 approaches stopped short: for near targets whose estimated
             axis leans away from the base the elbow came down onto the soil, for far ones leaning
             towards it the elbow was stretched straight (its singularity). Here: none at 10 deg,
-            1 at 20 deg, 2 at 30 deg, each a target within 0.27 m of the base's axis whose
-            estimated axis leans away from the base, for which the wrist would have to pass
-            over the base (no IK solution in the joint limits).
+            1 at 20 deg, 2 at 30 deg, where the estimated pose has no IK solution within the
+            joint limits: a target 0.26 m from the base's axis leaning away from the base (the
+            wrist would have to pass over the base), one 0.64 m out leaning 62 deg towards it
+            (past the reach).
         mount_yaw_deg, mount_roll_deg: base rotation (deg), 0: standing upright, q = 0 along -x.
         tool, cup_radius, tube_length, finger_*: the tool, as in ``RobotConfig``.
         kp_large, kp_small: position gains of the shoulder/elbow and wrist actuators
