@@ -79,12 +79,13 @@ def robots_benchmark_cell(entry=ROBOTS):
 
 
 def pixels_answer():
-    n, clean, camera = PIXELS["episodes"], PIXELS["successes"]["clean"], PIXELS["successes"]["camera_model"]
-    assert len(set(clean.values())) == len(set(camera.values())) == 1, "the sentence quotes one count per robot"
+    n, wins = PIXELS["episodes"], PIXELS["successes"]
     axis, top = PIXELS["median_axis_error_deg"], PIXELS["median_cap_top_error_mm"]
-    return (f"{clean['gantry']}/{n} picked from clean pixels with each robot, as with exact poses (median axis "
-            f"error {axis['clean']:.1f}°, cap top {top['clean']:.1f} mm on those targets); {camera['gantry']}/{n} "
-            f"with the camera model ({axis['camera_model']:.1f}°, {top['camera_model']:.1f} mm)")
+    return (f"from clean pixels {wins['clean']['gantry']}/{n} (gantry) and {wins['clean']['jaco']}/{n} (Jaco), with the "
+            f"camera model {wins['camera_model']['gantry']}/{n} and {wins['camera_model']['jaco']}/{n}, against "
+            f"{wins['exact']['gantry']}/{n} and {wins['exact']['jaco']}/{n} with exact poses on the same episodes (median "
+            f"axis error {axis['clean']:.1f}° / {axis['camera_model']:.1f}°, cap top {top['clean']:.1f} / "
+            f"{top['camera_model']:.1f} mm on those targets)")
 
 
 def policy_answer():
