@@ -129,8 +129,9 @@ class Solid:
     centre: np.ndarray  # bounding-box centre, model frame
     radius: float
     volume: float
-    pieces: tuple[np.ndarray, ...] = ()  # the vertices of the cap and of the stem (the hulls' pieces), model frame
+    pieces: tuple[np.ndarray, ...] = ()  # the convex hull vertices of the cap and of the stem, model frame
     piece_hulls: tuple[manifold3d.Manifold, ...] = ()  # the cap's and the stem's convex hulls
+    piece_planes: tuple[np.ndarray, ...] = ()  # their facets' planes (n, d): n . x + d <= 0 inside, model frame
 
 
 @cache
@@ -140,10 +141,14 @@ def model_solid(species: Species, model_id: int) -> Solid:
     lo, hi = model.mesh.bounds
     centre = (lo + hi) / 2
     radius = float(np.linalg.norm(model.mesh.vertices - centre, axis=1).max())
-    pieces = (np.asarray(model.cap_mesh.vertices, float), np.asarray(model.stem_mesh.vertices, float))
+    from scipy.spatial import ConvexHull
+
+    hulls_of_pieces = [ConvexHull(np.asarray(m.vertices, float)) for m in (model.cap_mesh, model.stem_mesh)]
+    pieces = tuple(h.points[h.vertices] for h in hulls_of_pieces)  # the hull's own vertices: the same hull
+    planes = tuple(h.equations for h in hulls_of_pieces)
     piece_hulls = tuple(_mesh_to_manifold(m.vertices, m.faces).hull() for m in (model.cap_mesh, model.stem_mesh))
     return Solid(exact, _proxy(model, exact, outer=False), _proxy(model, exact, outer=True),
-                 piece_hulls[0] + piece_hulls[1], centre, radius, float(exact.volume()), pieces, piece_hulls)
+                 piece_hulls[0] + piece_hulls[1], centre, radius, float(exact.volume()), pieces, piece_hulls, planes)
 
 
 @dataclass
@@ -156,6 +161,7 @@ class Posed:
     radius: float
     volume: float
     _moved: dict[str, manifold3d.Manifold] = field(default_factory=dict, repr=False)
+    _points: list[np.ndarray] | None = field(default=None, repr=False)
     _boxes: list[tuple[np.ndarray, np.ndarray]] | None = field(default=None, repr=False)
 
     @classmethod
@@ -166,13 +172,30 @@ class Posed:
         return cls(solid, affine, centre, solid.radius * float(scale_vector.max()),
                    solid.volume * float(np.prod(scale_vector)))
 
+    def piece_points(self) -> list[np.ndarray]:
+        """The world-frame vertices of each hull piece (the cap's, the stem's)."""
+        if self._points is None:
+            rot, shift = self.affine[:, :3], self.affine[:, 3]
+            self._points = [v @ rot.T + shift for v in self.solid.pieces]
+        return self._points
+
     def piece_boxes(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """The world-frame axis-aligned bounding box (low, high corners) of each hull piece."""
         if self._boxes is None:
-            rot, shift = self.affine[:, :3], self.affine[:, 3]
-            moved = [v @ rot.T + shift for v in self.solid.pieces]
-            self._boxes = [(v.min(axis=0), v.max(axis=0)) for v in moved]
+            self._boxes = [(v.min(axis=0), v.max(axis=0)) for v in self.piece_points()]
         return self._boxes
+
+    def holds_a_point_of(self, piece: int, points: np.ndarray) -> bool:
+        """Whether any of ``points`` (world frame) lies strictly inside this solid's hull piece
+        ``piece`` (0: the cap, 1: the stem), by 1 µm or more."""
+        lo, hi = self.piece_boxes()[piece]
+        points = points[np.all((points >= lo) & (points <= hi), axis=1)]  # only these can be inside
+        if not len(points):
+            return False
+        local = np.linalg.solve(self.affine[:, :3], (points - self.affine[:, 3]).T).T
+        planes = self.solid.piece_planes[piece]
+        # The planes' unit normals are the model frame's; scaling the point back keeps the sign test exact.
+        return bool(np.any(np.all(local @ planes[:, :3].T + planes[:, 3] < -1e-6, axis=1)))
 
     def manifold(self, kind: str) -> manifold3d.Manifold:
         """The ``exact``, ``inner``, ``outer`` or ``hulls`` manifold in the world, or ``"piece0"``
@@ -181,6 +204,17 @@ class Posed:
             solid = self.solid.piece_hulls[int(kind[5:])] if kind.startswith("piece") else getattr(self.solid, kind)
             self._moved[kind] = solid.transform(self.affine)
         return self._moved[kind]
+
+
+def _separated(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether a plane separates the convex hulls of point sets ``a`` and ``b``, tried across the
+    line between their centroids and across its horizontal part (a found plane proves them
+    apart; none found proves nothing)."""
+    d = b.mean(axis=0) - a.mean(axis=0)
+    for axis in (d, np.array([d[0], d[1], 0.0])):
+        if axis @ axis > 0 and (a @ axis).max() < (b @ axis).min():
+            return True
+    return False
 
 
 def intersection_iou(a: manifold3d.Manifold, b: manifold3d.Manifold, volume_a: float, volume_b: float) -> float:
@@ -207,15 +241,22 @@ def exceeds_iou(candidate: Posed, neighbours: Sequence[Posed], tau: float, count
         mine = candidate.manifold("hulls")
         boxes = candidate.piece_boxes()
         for other in neighbours:
-            # Pieces whose bounding boxes are apart share no volume, so only the others are
-            # intersected; with no overlap allowed (tau 0) a piece pair sharing volume decides
+            # Pieces whose bounding boxes are apart, or that a plane separates, share no volume,
+            # so only the others are intersected; with no overlap allowed (tau 0) a piece pair sharing volume decides
             # alone, a cheaper boolean than the two mushrooms' whole hulls. Same answers.
+            theirs_pts = other.piece_points()
             touching = [(i, j) for i, (lo1, hi1) in enumerate(boxes) for j, (lo2, hi2) in enumerate(other.piece_boxes())
-                        if np.all(lo1 <= hi2) and np.all(lo2 <= hi1)]
+                        if np.all(lo1 <= hi2) and np.all(lo2 <= hi1)
+                        and not _separated(candidate.piece_points()[i], theirs_pts[j])]
             if not touching:
                 continue
             counts.exact += 1
             if tau == 0:
+                # A vertex of one piece strictly inside the other proves a shared volume without
+                # a boolean (the rejected candidates are most of the booleans).
+                if any(other.holds_a_point_of(j, candidate.piece_points()[i])
+                       or candidate.holds_a_point_of(i, theirs_pts[j]) for i, j in touching):
+                    return True
                 if any((candidate.manifold(f"piece{i}") ^ other.manifold(f"piece{j}")).volume() > 0 for i, j in touching):
                     return True
                 continue

@@ -150,3 +150,30 @@ def test_bounded_overlap_test_decides_as_the_exact_booleans():
         outcomes.add(exact)
     assert outcomes == {True, False}
     assert counts.bounds > 0 and counts.exact < 160  # the bounds did decide some pairs
+
+
+def test_the_hull_overlap_test_decides_as_the_boolean_of_the_whole_hulls():
+    """The hull test's shortcuts (boxes apart, a separating plane, a vertex inside the other
+    piece) give the answer of the exact boolean of the two mushrooms' hulls, touching or not."""
+    from generator.geometry import rotation_xyz
+    from generator.overlap import OverlapCounts, Posed, exceeds_iou, intersection_iou, model_solid
+
+    rng = np.random.default_rng(5)
+    counts = OverlapCounts()
+    outcomes = set()
+    for _ in range(120):
+        posed = []
+        for _ in range(2):
+            species = ("white", "brown")[int(rng.integers(2))]
+            t = np.eye(4)
+            scale = rng.uniform(0.8, 2.0) * rng.uniform(0.9, 1.1, 3)
+            t[:3, :3] = rotation_xyz(*rng.normal(0, 0.35, 2), rng.uniform(0, 2 * np.pi)) * scale
+            t[:2, 3] = rng.uniform(-0.06, 0.06, 2)
+            posed.append(Posed.place(model_solid(species, int(rng.integers(7))), t, scale))
+        a, b = posed
+        for tau in (0.0, 0.02):
+            whole = intersection_iou(a.manifold("hulls"), b.manifold("hulls"), a.manifold("hulls").volume(),
+                                     b.manifold("hulls").volume()) > tau
+            assert exceeds_iou(a, [b], tau, counts, solids="hulls") == whole
+            outcomes.add(whole)
+    assert outcomes == {True, False}
