@@ -1,5 +1,5 @@
-"""``SMS3DPick-v2``: pick one mushroom from a synthetic bed with a Cartesian gantry harvester or
-a Kinova Jaco, by a suction tool (default) or the Jaco 3-finger hand.
+"""``SMS3DPick-v2``: pick one mushroom from a synthetic bed with a Cartesian gantry harvester, a
+Kinova Jaco or a UR5e-class arm, by a suction tool (default) or the Jaco 3-finger hand.
 
 The env holds the gym API only: spaces, reset/step, observation, reward assembly and rendering.
 Its options are records checked where they are defined (:mod:`sms3d_env.env_args` checks the
@@ -77,7 +77,7 @@ class SMS3DPickEnv(gym.Env):
 
     | key | size | content |
     | --- | --- | --- |
-    | ``joint_pos``, ``joint_vel`` | one per robot joint (6, 6 for the gantry and the Jaco) | the robot's driven joints, ``robot.joints`` (rad or m, rad/s or m/s) |
+    | ``joint_pos``, ``joint_vel`` | one per robot joint (6 for each built-in robot) | the robot's driven joints, ``robot.joints`` (rad or m, rad/s or m/s) |
     | ``tool_pose`` | 7 | tool site position (m) and quaternion (w, x, y, z) |
     | ``suction`` | 3 | suction: (on, sealed, seal load / capacity); hand: (closure 0–1, holding with ≥ 2 fingers, finger force on the target N) |
     | ``target_pose`` | 6 | the *estimated* cap top (m) and stem axis (from the pose source) |
@@ -122,7 +122,7 @@ class SMS3DPickEnv(gym.Env):
     | Parameter | Type | Default | Description |
     | --- | --- | --- | --- |
     | ``render_mode`` | ``str`` or None | None | ``"rgb_array"``, ``"depth_array"`` (metric depth in metres) or ``"human"`` (MuJoCo's passive viewer, synced at every reset and step, closed by ``close()``; it needs a display, see :mod:`sms3d_env.viewer`, else ``DisplayUnavailableError``) |
-    | ``robot`` | ``str``, a robot configuration (``RobotSpec``: ``GantryConfig``, ``RobotConfig``, ...) or None | ``"gantry"`` | a registered robot's name (``sms3d_env.registered_robots()``): ``"gantry"`` (the Cartesian harvester of :mod:`sms3d_env.gantry`), ``"jaco"`` (the Kinova Jaco hanging above the bed) or one added with ``sms3d_env.register_robot`` (docs/add-a-robot.md); or a robot configuration; every link of either built-in robot collides with the soil and the mushrooms. None: the default, ``"gantry"`` |
+    | ``robot`` | ``str``, a robot configuration (``RobotSpec``: ``GantryConfig``, ``RobotConfig``, ...) or None | ``"gantry"`` | a registered robot's name (``sms3d_env.registered_robots()``): ``"gantry"`` (the Cartesian harvester of :mod:`sms3d_env.gantry`), ``"jaco"`` (the Kinova Jaco hanging above the bed), ``"ur5e"`` (a UR5e-class arm on a pedestal beside it, :mod:`sms3d_env.ur5e`) or one added with ``sms3d_env.register_robot`` (docs/add-a-robot.md); or a robot configuration; every link of every built-in robot collides with the soil and the mushrooms. None: the default, ``"gantry"`` |
     | ``tool`` | ``str`` or None | None | ``"suction"`` or ``"hand"``; overrides the robot's tool (default: ``"suction"``) |
     | ``scene`` | ``SceneSourceConfig``, ``generator.SceneConfig``, a list of ``generator.Scene``, a dataset folder, or None | None | where each reset's bed comes from and which mushrooms can move (:class:`~sms3d_env.scene_source.SceneSourceConfig`: generated beds, a fixed list, a pool, ``free_radius``). A ``SceneConfig`` (or its mapping form, e.g. ``{"placement": {"num_mushrooms": 10}}``): a new bed of it per reset; scenes or a ``sms3d generate`` folder (checksums verified): one drawn per reset (``options={"scene": k}``); None: a new 25-mushroom bed per reset, every mushroom free |
     | ``target`` | ``str`` or ``TargetRule`` | ``"harvest_ready"`` | which mushroom is picked (:class:`~sms3d_env.targets.TargetRule`), drawn uniformly within a class: ``"harvest_ready"`` (a reachable cap of at least ``harvest_diameter``, 50 mm: what a farm picks now), ``"isolated"``, ``"crowded"``, ``"approach_blocked"``, ``"small"``; or ``"tallest"`` (v1's), ``"largest"``, ``"random"``, ``"index"`` with its ``index``; ``max_tilt_deg``; ``options={"target": i}`` picks mushroom ``i`` for one reset |
