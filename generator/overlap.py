@@ -232,38 +232,34 @@ class OverlapCounts:
     bounds: int = 0
 
 
+def _hulls_exceed(a: Posed, b: Posed, tau: float, counts: OverlapCounts) -> bool:
+    """Whether the IoU of ``a``'s and ``b``'s collision hulls exceeds ``tau``, as their exact
+    boolean decides it. Hull pieces (cap, stem) whose boxes are apart or that a plane separates
+    share no volume; with no overlap allowed (``tau`` 0) a piece pair sharing volume decides
+    alone, proved by a vertex of one strictly inside the other or else by the pair's boolean
+    (cheaper than the whole hulls')."""
+    points_a, points_b = a.piece_points(), b.piece_points()
+    touching = [(i, j) for i, (lo1, hi1) in enumerate(a.piece_boxes()) for j, (lo2, hi2) in enumerate(b.piece_boxes())
+                if np.all(lo1 <= hi2) and np.all(lo2 <= hi1) and not _separated(points_a[i], points_b[j])]
+    if not touching:
+        return False
+    if tau == 0:
+        if any(b.holds_a_point_of(j, points_a[i]) or a.holds_a_point_of(i, points_b[j]) for i, j in touching):
+            return True
+        counts.exact += 1
+        return any((a.manifold(f"piece{i}") ^ b.manifold(f"piece{j}")).volume() > 0 for i, j in touching)
+    counts.exact += 1
+    mine, theirs = a.manifold("hulls"), b.manifold("hulls")
+    return intersection_iou(mine, theirs, mine.volume(), theirs.volume()) > tau
+
+
 def exceeds_iou(candidate: Posed, neighbours: Sequence[Posed], tau: float, counts: OverlapCounts,
                 solids: str = "meshes") -> bool:
     """Whether the exact IoU of ``candidate`` with any of ``neighbours`` exceeds ``tau``: of their
     meshes (``solids="meshes"``, the paper's test) or of their collision hulls (``"hulls"``:
     the cap's and the stem's convex hulls, which fill the hollow under the cap)."""
     if solids == "hulls":
-        mine = candidate.manifold("hulls")
-        boxes = candidate.piece_boxes()
-        for other in neighbours:
-            # Pieces whose bounding boxes are apart, or that a plane separates, share no volume,
-            # so only the others are intersected; with no overlap allowed (tau 0) a piece pair sharing volume decides
-            # alone, a cheaper boolean than the two mushrooms' whole hulls. Same answers.
-            theirs_pts = other.piece_points()
-            touching = [(i, j) for i, (lo1, hi1) in enumerate(boxes) for j, (lo2, hi2) in enumerate(other.piece_boxes())
-                        if np.all(lo1 <= hi2) and np.all(lo2 <= hi1)
-                        and not _separated(candidate.piece_points()[i], theirs_pts[j])]
-            if not touching:
-                continue
-            counts.exact += 1
-            if tau == 0:
-                # A vertex of one piece strictly inside the other proves a shared volume without
-                # a boolean (the rejected candidates are most of the booleans).
-                if any(other.holds_a_point_of(j, candidate.piece_points()[i])
-                       or candidate.holds_a_point_of(i, theirs_pts[j]) for i, j in touching):
-                    return True
-                if any((candidate.manifold(f"piece{i}") ^ other.manifold(f"piece{j}")).volume() > 0 for i, j in touching):
-                    return True
-                continue
-            theirs = other.manifold("hulls")
-            if intersection_iou(mine, theirs, mine.volume(), theirs.volume()) > tau:
-                return True
-        return False
+        return any(_hulls_exceed(candidate, other, tau, counts) for other in neighbours)
     depth = [float(np.linalg.norm(n.centre - candidate.centre)) / (n.radius + candidate.radius) for n in neighbours]
     for j in sorted(range(len(neighbours)), key=depth.__getitem__):
         other = neighbours[j]

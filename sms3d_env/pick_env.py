@@ -39,7 +39,7 @@ from sms3d_env.robot import RobotSpec
 from sms3d_env.robots import make_robot
 from sms3d_env.scene_source import SceneSource, scene_source_config
 from sms3d_env.start_states import PregraspStart, check_share
-from sms3d_env.targets import Reachability, TargetRule, select_target
+from sms3d_env.targets import Reachability, TargetRule, pickable, select_target
 from sms3d_env.task_obs import TASK_OBS_SIZES, tool_in_target, twist_about
 from sms3d_env.viewer import PassiveViewer
 from sms3d_env.world import PICK_CAMERA, PICK_CAMERA_DISTANCE, World, aim_pick_camera, build_world
@@ -416,8 +416,7 @@ class SMS3DPickEnv(gym.Env):
         rule = self.target_rule
         cap_top = d.site_xpos[w.cap_top_sites[target]].copy()
         axis = d.xmat[w.body_ids[target]].reshape(3, 3)[:, 2].copy()
-        tilt = np.degrees(np.arccos(np.clip(axis[2], -1.0, 1.0)))
-        reachable = bool(tilt <= rule.max_tilt_deg and self.reach.reachable(cap_top, axis))
+        reachable = pickable(cap_top, axis, self.reach, rule.max_tilt_deg)
         self.picking = PickingModel(w, self.params, target, reachable, self.suction_mode == "latched",
                                     roots=previous.roots)
         ep = self.picking.state

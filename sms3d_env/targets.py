@@ -250,8 +250,13 @@ def select_target(scene: Any, rule: str, rng: np.random.Generator, reach: Reacha
     return int(order[0]), False
 
 
-def _ok(inst: Any, reach: Reachability, max_tilt_deg: float) -> bool:
-    axis = np.asarray(inst.rotation)[:, 2]
+def pickable(cap_top: np.ndarray, axis: np.ndarray, reach: Reachability, max_tilt_deg: float) -> bool:
+    """Whether a mushroom whose cap top and unit stem axis are these is a target: it leans at
+    most ``max_tilt_deg`` from vertical and the IK reaches it (``Reachability.reachable``)."""
     if np.degrees(np.arccos(np.clip(axis[2], -1, 1))) > max_tilt_deg:
         return False
-    return reach.reachable(np.asarray(inst.cap_top), axis)
+    return reach.reachable(np.asarray(cap_top), axis)
+
+
+def _ok(inst: Any, reach: Reachability, max_tilt_deg: float) -> bool:
+    return pickable(inst.cap_top, np.asarray(inst.rotation)[:, 2], reach, max_tilt_deg)

@@ -34,6 +34,7 @@ from sms3d_env.pick_env import SMS3DPickEnv
 from sms3d_env.pickers.scripted import ScriptedPicker
 from sms3d_env.pose_sources import PoseEstimate, PoseSource, make_pose_source
 from sms3d_env.records import record_of
+from sms3d_env.targets import pickable
 
 __all__ = ["MaskedActionError", "SMS3DHarvestEnv"]
 
@@ -222,9 +223,7 @@ class SMS3DHarvestEnv(gym.Env):
         self._neighbours = None
 
     def _reachable(self, det: Detection) -> bool:
-        axis = det.axis / np.linalg.norm(det.axis)
-        tilt = np.degrees(np.arccos(np.clip(axis[2], -1.0, 1.0)))
-        return bool(tilt <= self.config.max_tilt_deg and self.pick.reach.reachable(det.cap_top, axis))
+        return pickable(det.cap_top, det.axis / np.linalg.norm(det.axis), self.pick.reach, self.config.max_tilt_deg)
 
     # ------------------------------------------------------------------ pick
     def _pick(self, slot: int) -> tuple[dict[str, Any], bool, set[int]]:

@@ -32,7 +32,6 @@ from sms3d_env.study.statistics import (
     success_table,
     tolerable_error,
 )
-from sms3d_env.study.success_map import target_words
 
 PAPER_ERRORS_DEG = {"SMS3D synthetic (Point Transformer)": 1.67, "SMS3D real (M18K)": 3.68}
 
@@ -79,7 +78,7 @@ def plot_sweep(rows: Sequence[dict[str, Any]], path: str | Path, perception: dic
     top.legend(fontsize=8, loc="lower left")
     pickers = sorted({picker_name(r.get("picker", "scripted")) for r in rows})
     robot, tool, size, target, _ = axes(rows[0])
-    top.set_title(f"{', '.join(pickers).capitalize()} on the {robot} ({tool}, {size} mushrooms{target_words(target)}):\n"
+    top.set_title(f"{', '.join(pickers).capitalize()} on the {robot} ({tool}, {size} mushrooms{success_map.target_words(target)}):\n"
                   "pick success vs orientation error")
     default = [r for r in table if r["variant"] == "default"]
     causes = sorted({c for r in default for c in r["causes"]})

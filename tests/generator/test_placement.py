@@ -126,24 +126,32 @@ def test_proxies_bracket_every_model():
             assert 0.6 < solid.inner.volume() / solid.volume < 1 < solid.outer.volume() / solid.volume < 1.6
 
 
+def _random_pair(rng, spread):
+    """Two posed models (random species, model, tilt, yaw, scale) whose stem bases lie within
+    ``spread`` (m) of the origin in x and y."""
+    from generator.geometry import rotation_xyz
+    from generator.overlap import Posed, model_solid
+
+    posed = []
+    for _ in range(2):
+        species = ("white", "brown")[int(rng.integers(2))]
+        t = np.eye(4)
+        scale = rng.uniform(0.8, 2.0) * rng.uniform(0.9, 1.1, 3)
+        t[:3, :3] = rotation_xyz(*rng.normal(0, 0.35, 2), rng.uniform(0, 2 * np.pi)) * scale
+        t[:2, 3] = rng.uniform(-spread, spread, 2)
+        posed.append(Posed.place(model_solid(species, int(rng.integers(7))), t, scale))
+    return posed
+
+
 def test_bounded_overlap_test_decides_as_the_exact_booleans():
     """Random pairs across the depths where each bound is used, many near tau."""
-    from generator.geometry import rotation_xyz
-    from generator.overlap import OverlapCounts, Posed, exceeds_iou, intersection_iou, model_solid
+    from generator.overlap import OverlapCounts, exceeds_iou, intersection_iou
 
     rng = np.random.default_rng(3)
     counts = OverlapCounts()
     outcomes = set()
     for _ in range(160):
-        posed = []
-        for _ in range(2):
-            species = ("white", "brown")[int(rng.integers(2))]
-            t = np.eye(4)
-            scale = rng.uniform(0.8, 2.0) * rng.uniform(0.9, 1.1, 3)
-            t[:3, :3] = rotation_xyz(*rng.normal(0, 0.35, 2), rng.uniform(0, 2 * np.pi)) * scale
-            t[:2, 3] = rng.uniform(-0.035, 0.035, 2)
-            posed.append(Posed.place(model_solid(species, int(rng.integers(7))), t, scale))
-        a, b = posed
+        a, b = _random_pair(rng, spread=0.035)
         tau = float(rng.choice([0.0, 0.01, 0.05, 0.2]))
         exact = intersection_iou(a.manifold("exact"), b.manifold("exact"), a.volume, b.volume) > tau
         assert exceeds_iou(a, [b], tau, counts) == exact
@@ -155,22 +163,13 @@ def test_bounded_overlap_test_decides_as_the_exact_booleans():
 def test_the_hull_overlap_test_decides_as_the_boolean_of_the_whole_hulls():
     """The hull test's shortcuts (boxes apart, a separating plane, a vertex inside the other
     piece) give the answer of the exact boolean of the two mushrooms' hulls, touching or not."""
-    from generator.geometry import rotation_xyz
-    from generator.overlap import OverlapCounts, Posed, exceeds_iou, intersection_iou, model_solid
+    from generator.overlap import OverlapCounts, exceeds_iou, intersection_iou
 
     rng = np.random.default_rng(5)
     counts = OverlapCounts()
     outcomes = set()
     for _ in range(120):
-        posed = []
-        for _ in range(2):
-            species = ("white", "brown")[int(rng.integers(2))]
-            t = np.eye(4)
-            scale = rng.uniform(0.8, 2.0) * rng.uniform(0.9, 1.1, 3)
-            t[:3, :3] = rotation_xyz(*rng.normal(0, 0.35, 2), rng.uniform(0, 2 * np.pi)) * scale
-            t[:2, 3] = rng.uniform(-0.06, 0.06, 2)
-            posed.append(Posed.place(model_solid(species, int(rng.integers(7))), t, scale))
-        a, b = posed
+        a, b = _random_pair(rng, spread=0.06)
         for tau in (0.0, 0.02):
             whole = intersection_iou(a.manifold("hulls"), b.manifold("hulls"), a.manifold("hulls").volume(),
                                      b.manifold("hulls").volume()) > tau
